@@ -1,0 +1,77 @@
+"""Site description: the shipped YAML loads, ENU offsets match the published geometry."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.site import load_site, site_from_dict
+
+# E, N of each tower from LW1 (DESIGN §3).
+EXPECTED_EN = {
+    "LW1": (0.0, 0.0),
+    "LW2": (-447.8, 78.1),
+    "LW3": (367.2, -288.2),
+    "LW4": (-217.7, 629.6),
+    "LW5": (-332.1, 1712.2),
+}
+
+
+def test_tower_enu_offsets_match_published_geometry() -> None:
+    site = load_site()
+    for name, (e, n) in EXPECTED_EN.items():
+        t = site.towers[name]
+        assert t.enu[0] == pytest.approx(e, abs=0.1), name
+        assert t.enu[1] == pytest.approx(n, abs=0.1), name
+
+
+def test_radar_and_sensor_set() -> None:
+    site = load_site()
+    assert site.rf_sensors == ("LW2", "LW3", "LW4", "LW5")
+    assert site.radar.fov_az_deg == 120.0 and site.radar.fov_el_deg == 60.0
+    assert site.radar.range_gate_m == 800.0
+    lw3 = site.towers["LW3"].enu
+    d = ((site.radar.enu[0] - lw3[0]) ** 2 + (site.radar.enu[1] - lw3[1]) ** 2) ** 0.5
+    assert d < 20.0  # on a mast beside LW3
+    assert site.radar.enu[2] == pytest.approx(10.0, abs=0.05)
+    assert site.clock_offset_s("truth") == -4 * 3600.0
+    assert site.clock_offset_s("rf") == 0.0
+
+
+def test_enu_round_trip() -> None:
+    site = load_site()
+    lat, lon, h = site.to_geodetic([100.0, -2000.0], [250.0, 1500.0], [30.0, 120.0])
+    e, n, u = site.to_enu(lat, lon, h)
+    assert e.tolist() == pytest.approx([100.0, -2000.0], abs=1e-6)
+    assert n.tolist() == pytest.approx([250.0, 1500.0], abs=1e-6)
+    assert u.tolist() == pytest.approx([30.0, 120.0], abs=1e-6)
+
+
+def _doc() -> dict:
+    return yaml.safe_load(Path(load_site().source or "").read_text())
+
+
+@pytest.mark.parametrize(
+    ("mutate", "message"),
+    [
+        (lambda d: d.pop("origin"), "missing key 'origin'"),
+        (lambda d: d["towers"]["LW2"].update(lat=95.0), "towers.LW2: lat 95.0 outside"),
+        (lambda d: d["radar"].update(range_gate_m=-1), "range_gate_m must be > 0"),
+        (lambda d: d.update(rf_sensors=["LW2", "LW9", "LW4"]), "unknown tower 'LW9'"),
+        (lambda d: d.update(rf_sensors=["LW2", "LW3"]), "at least 3 RF sensors"),
+        (lambda d: d["takeoff"].update(h="high"), "'h' must be a number"),
+    ],
+)
+def test_bad_site_is_rejected_with_a_clear_message(mutate, message: str) -> None:  # type: ignore[no-untyped-def]
+    doc = _doc()
+    mutate(doc)
+    with pytest.raises(ConfigError, match=message):
+        site_from_dict(doc, Path("site.yaml"))
+
+
+def test_missing_site_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="site file not found"):
+        load_site(tmp_path / "nope.yaml")
