@@ -132,3 +132,21 @@ class Measurement:
     @property
     def dim(self) -> int:
         return int(self.z.shape[0])
+
+
+@dataclass
+class Flight:
+    """One flight: truth, radar frames and RF attempts on one UTC timeline, plus load reports."""
+
+    name: str
+    truth: list[TruthFix]
+    radar: list[RadarFrame]
+    rf: list[RfAttempt]
+    reports: dict[str, LoadReport] = field(default_factory=dict)
+    folder: Path | None = None
+
+    def truth_arrays(self) -> tuple[FloatArray, FloatArray]:
+        """(t[N], enu[N, 3]) of the truth samples, sorted by time."""
+        t = np.array([f.t for f in self.truth], dtype=float)
+        enu = np.array([(f.e, f.n, f.u) for f in self.truth], dtype=float).reshape(-1, 3)
+        return t, enu
