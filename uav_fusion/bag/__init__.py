@@ -1,0 +1,1 @@
+"""rosbag2 reading, writing and flight conversion (no rclpy)."""
