@@ -268,7 +268,9 @@ def _sqlite_file_messages(
                     offered_qos=parse_qos(qos),
                 ),
             )
-        cursor = con.execute("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
+        cursor = con.execute(
+            "SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id"
+        )
         for tid, stamp, data in cursor:
             name = ids.get(int(tid))
             if name is None:
@@ -330,7 +332,9 @@ class BagReader:
         self.files: list[Path] = self._locate()
         self.storage = STORAGE_SUFFIXES[self.files[0].suffix]
         self.backend, self._source, scan = self._choose_backend()
-        meta_topics = {t.name: t for t in self.metadata.topics} if self.metadata else {}
+        meta_topics: dict[str, BagTopic] = (
+            {t.name: t for t in self.metadata.topics} if self.metadata else {}
+        )
         self.topics: dict[str, BagTopic] = {}
         for name in [*meta_topics, *(n for n in scan.topics if n not in meta_topics)]:
             base = scan.topics.get(name) or meta_topics[name]
@@ -391,7 +395,8 @@ class BagReader:
             raise DataError(p, None, "bag directory holds no .mcap or .db3 storage file")
         kinds = {f.suffix for f in files}
         if len(kinds) > 1:
-            keep = ".mcap" if self.metadata is None or self.metadata.storage != "sqlite3" else ".db3"
+            db3 = self.metadata is not None and self.metadata.storage == "sqlite3"
+            keep = ".db3" if db3 else ".mcap"
             self.warnings.append(f"{p}: mixed storage files; reading only {keep}")
             files = [f for f in files if f.suffix == keep]
         return files
@@ -457,7 +462,7 @@ class BagReader:
                 if end_ns is not None and msg.timestamp_ns >= end_ns:
                     continue
                 yield msg
-        except Exception:  # noqa: S110 - reported once, at open
+        except Exception:  # damage was reported once, at open
             return
 
     def summary(self) -> str:
