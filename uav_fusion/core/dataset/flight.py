@@ -1,0 +1,136 @@
+"""Load one flight folder: RF CSV, radar JSON Lines and truth log on one UTC timeline."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from uav_fusion.core.dataset import fmt_utc
+from uav_fusion.core.dataset.radar import read_radar_jsonl
+from uav_fusion.core.dataset.rf import read_rf_csv
+from uav_fusion.core.dataset.truth import read_truth
+from uav_fusion.core.errors import DataError
+from uav_fusion.core.records import Flight
+from uav_fusion.core.site import Site, load_site
+
+RF_CANDIDATES = "AADM*.csv"
+# Spans closer than this are not called disjoint: a clock-offset error is minutes to hours.
+OVERLAP_TOLERANCE_S = 60.0
+
+
+def _listing(folder: Path) -> str:
+    names = sorted(p.name for p in folder.iterdir() if p.is_file())
+    return ", ".join(names) if names else "(no files)"
+
+
+def _find_one(folder: Path, pattern: str, what: str, arg: str) -> Path:
+    matches = sorted(p for p in folder.glob(pattern) if p.is_file())
+    if not matches:
+        raise DataError(
+            folder, None, f"no {what} file matches {pattern!r}; files here: {_listing(folder)}"
+        )
+    if len(matches) > 1:
+        names = ", ".join(p.name for p in matches)
+        raise DataError(
+            folder,
+            None,
+            f"{len(matches)} {what} files match {pattern!r} ({names}); "
+            f"choose one with {arg}=<file name>",
+        )
+    return matches[0]
+
+
+def _find_rf(folder: Path, rf_file: str) -> Path:
+    p = folder / rf_file
+    if p.is_file():
+        return p
+    cands = sorted(c.name for c in folder.glob(RF_CANDIDATES) if c.is_file())
+    if cands:
+        raise DataError(
+            folder,
+            None,
+            f"RF file {rf_file!r} not found; candidates: {', '.join(cands)}; "
+            "choose one with rf_file=<file name>",
+        )
+    raise DataError(
+        folder,
+        None,
+        f"RF file {rf_file!r} not found and no file matches {RF_CANDIDATES!r}; "
+        f"files here: {_listing(folder)}",
+    )
+
+
+def load_flight(
+    folder: str | Path,
+    site: Site | None = None,
+    *,
+    rf_file: str = "AADM.csv",
+    radar_glob: str = "radar_data_*.json",
+    truth_glob: str = "*vehicleOut.txt",
+    strict: bool = False,
+) -> Flight:
+    """Read the three files of one flight folder and check that their timelines overlap.
+
+    The RF file is named explicitly (``AADM.csv`` or a variant such as ``AADM_rerun.csv``);
+    radar and truth are found by glob and must match exactly one file each. A missing or
+    ambiguous file raises :class:`DataError` in both modes, listing what is there. If truth
+    and a sensor do not overlap in time at all (typically a wrong clock offset), strict mode
+    raises and lenient mode adds a ``WARNING`` note to both reports, with the apparent
+    offset error in hours.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DataError(folder, None, "flight folder not found")
+    site = site if site is not None else load_site()
+    rf_path = _find_rf(folder, rf_file)
+    radar_path = _find_one(folder, radar_glob, "radar", "radar_glob")
+    truth_path = _find_one(folder, truth_glob, "truth", "truth_glob")
+
+    rf, rf_rep = read_rf_csv(rf_path, site, strict=strict)
+    radar, radar_rep = read_radar_jsonl(radar_path, site, strict=strict)
+    truth, truth_rep = read_truth(truth_path, site, strict=strict)
+    flight = Flight(
+        name=folder.name,
+        truth=truth,
+        radar=radar,
+        rf=rf,
+        reports={"rf": rf_rep, "radar": radar_rep, "truth": truth_rep},
+        folder=folder,
+    )
+    _check_overlap(flight, site, truth_path, strict)
+    return flight
+
+
+def _check_overlap(flight: Flight, site: Site, truth_path: Path, strict: bool) -> None:
+    truth_rep = flight.reports["truth"]
+    spans = {
+        "rf": [a.t for a in flight.rf],
+        "radar": [f.t for f in flight.radar],
+    }
+    if not flight.truth:
+        truth_rep.notes.append("WARNING: no truth fixes, the timelines could not be checked")
+        return
+    t0, t1 = flight.truth[0].t, flight.truth[-1].t
+    cur_h = site.clock_offset_s("truth") / 3600.0
+    for name, ts in spans.items():
+        if not ts:
+            flight.reports[name].notes.append(
+                "WARNING: no data, the timeline could not be checked against truth"
+            )
+            continue
+        s0, s1 = ts[0], ts[-1]
+        if max(t0, s0) - min(t1, s1) <= OVERLAP_TOLERANCE_S:
+            continue
+        dh = ((s0 + s1) / 2.0 - (t0 + t1) / 2.0) / 3600.0
+        shift = f"{dh:+.1f} h" if abs(dh) >= 1.0 else f"{60.0 * dh:+.0f} min"
+        what = (
+            f"truth ({fmt_utc(t0)} to {fmt_utc(t1)}) and {name} ({fmt_utc(s0)} to "
+            f"{fmt_utc(s1)}) do not overlap in time: the {name} data lie about {shift} "
+            f"from the truth; the truth clock offset (clock_offsets_h.truth = {cur_h:+g}) is "
+            f"probably wrong by about {shift.lstrip('+-')}"
+        )
+        if round(dh) != 0:
+            what += f" (try clock_offsets_h.truth: {cur_h - round(dh):+g})"
+        if strict:
+            raise DataError(truth_path, None, what)
+        truth_rep.notes.append("WARNING: " + what)
+        flight.reports[name].notes.append("WARNING: " + what)
