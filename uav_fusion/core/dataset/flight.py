@@ -73,9 +73,9 @@ def load_flight(
     The RF file is named explicitly (``AADM.csv`` or a variant such as ``AADM_rerun.csv``);
     radar and truth are found by glob and must match exactly one file each. A missing or
     ambiguous file raises :class:`DataError` in both modes, listing what is there. If truth
-    and a sensor do not overlap in time at all (typically a wrong clock offset), strict mode
-    raises and lenient mode adds a ``WARNING`` note to both reports, with the apparent
-    offset error in hours.
+    and a sensor do not overlap in time (spans more than ``OVERLAP_TOLERANCE_S`` apart,
+    typically a wrong clock offset), strict mode raises and lenient mode adds a ``WARNING``
+    note to both reports, with the apparent offset error.
     """
     folder = Path(folder)
     if not folder.is_dir():
