@@ -1,0 +1,305 @@
+"""evaluator_node: keeps the paper's Table II live and writes the evaluation report.
+
+Subscribes (topic names are parameters; defaults from docs/graph.md):
+
+- ``truth/fix`` (sensor_msgs/NavSatFix): RTK truth, converted to ENU with the site file;
+- ``radar/raw`` (geometry_msgs/PoseWithCovarianceStamped): every UAV-class radar report;
+- ``rf/fix`` (geometry_msgs/PointStamped): every RF attempt, failed ones as x = y = z = NaN;
+- ``fusion/accepted/radar``, ``fusion/accepted/rf``: the measurements the filter accepted;
+- ``fusion/odom/updated``, ``fusion/odom/coasted`` (nav_msgs/Odometry): the filter's steps.
+
+Every message goes into a :class:`uav_fusion.core.evaluation.Evaluator`; nothing is scored on
+arrival, so estimates that arrive before the truth bracketing them are scored exactly once
+the report is made. Malformed messages (NaN, wrong frame, zero stamp, bad covariance) are
+counted by topic and reason and dropped. Every ``log_period_s`` the node logs a summary line
+and publishes the rows on ``/diagnostics``. The report (report.md, metrics.csv,
+metrics.json, figures) is written to ``output_dir`` when the ``~/write_report`` service
+(std_srvs/Trigger) is called and, if ``write_on_shutdown`` is true, when the node stops.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import try_shutdown
+from sensor_msgs.msg import NavSatFix
+from std_srvs.srv import Trigger
+
+from uav_fusion.conversions import (
+    MessageError,
+    is_failed_rf,
+    msg_to_radar_measurement,
+    msg_to_rf_measurement,
+    navsatfix_to_truth,
+    odometry_to_state,
+    time_from_stamp,
+)
+from uav_fusion.core.errors import UavFusionError
+from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
+from uav_fusion.core.report import ReportFiles, write_report
+from uav_fusion.core.site import Site, load_site
+
+M = TypeVar("M")
+
+NODE_NAME = "evaluator_node"
+
+
+class EvaluatorNode(Node):
+    """Feeds an :class:`Evaluator` from the live graph and writes the report on request."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        p = self.declare_parameter
+        site_file = str(p("site_file", "").value)
+        self.truth_topic = str(p("truth_topic", "truth/fix").value)
+        self.radar_raw_topic = str(p("radar_raw_topic", "radar/raw").value)
+        self.rf_topic = str(p("rf_topic", "rf/fix").value)
+        self.accepted_radar_topic = str(p("accepted_radar_topic", "fusion/accepted/radar").value)
+        self.accepted_rf_topic = str(p("accepted_rf_topic", "fusion/accepted/rf").value)
+        self.updated_topic = str(p("odom_updated_topic", "fusion/odom/updated").value)
+        self.coasted_topic = str(p("odom_coasted_topic", "fusion/odom/coasted").value)
+        frame = str(p("frame_id", "").value)
+        self.output_dir = Path(str(p("output_dir", "out/report").value))
+        tolerance = float(p("coverage_tolerance_s", 1.0).value)
+        max_gap = float(p("max_truth_gap_s", 2.0).value)
+        self.log_period_s = float(p("log_period_s", 5.0).value)
+        self.write_on_shutdown = bool(p("write_on_shutdown", True).value)
+        self.figures = bool(p("figures", True).value)
+        depth = int(p("qos_depth", 1000).value)
+        self.flight_name = str(p("flight_name", "").value)
+
+        try:
+            self.site: Site = load_site(site_file or None)
+            self.evaluator = Evaluator(
+                radar_enu=self.site.radar.enu, tolerance_s=tolerance, max_truth_gap_s=max_gap
+            )
+        except (UavFusionError, ValueError) as exc:
+            raise UavFusionError(f"{NODE_NAME}: bad parameters: {exc}") from None
+        self.frame_id = frame or self.site.frame_id
+        self.dropped: Counter[str] = Counter()
+        self.received: Counter[str] = Counter()
+        self._lock = threading.Lock()
+        self.last_report: ReportFiles | None = None
+
+        qos = QoSProfile(
+            depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
+        )
+        self.create_subscription(NavSatFix, self.truth_topic, self._on_truth, qos)
+        self.create_subscription(
+            PoseWithCovarianceStamped, self.radar_raw_topic, self._on_radar_raw, qos
+        )
+        self.create_subscription(PointStamped, self.rf_topic, self._on_rf, qos)
+        self.create_subscription(
+            PoseWithCovarianceStamped, self.accepted_radar_topic, self._on_accepted_radar, qos
+        )
+        self.create_subscription(PointStamped, self.accepted_rf_topic, self._on_accepted_rf, qos)
+        self.create_subscription(Odometry, self.updated_topic, self._on_updated, qos)
+        self.create_subscription(Odometry, self.coasted_topic, self._on_coasted, qos)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_service(Trigger, "~/write_report", self._on_write_report)
+        if self.log_period_s > 0 and math.isfinite(self.log_period_s):
+            self.create_timer(self.log_period_s, self._on_timer)
+        self.get_logger().info(
+            f"scoring against truth on '{self.truth_topic}' in frame '{self.frame_id}'; "
+            f"report -> {self.output_dir} (service ~/write_report)"
+        )
+
+    # --- input -----------------------------------------------------------------------------
+    def _guard(self, topic: str, fn: Callable[[M], bool], msg: M) -> None:
+        """Run one message's conversion + feed; count and drop anything malformed."""
+        self.received[topic] += 1
+        try:
+            with self._lock:
+                fn(msg)  # a refusal is counted, by reason, in the Evaluator's drops
+        except MessageError as exc:
+            self.dropped[f"{topic}: {exc.reason}"] += 1
+        except (ValueError, TypeError, OverflowError, IndexError) as exc:
+            self.dropped[f"{topic}: {type(exc).__name__}"] += 1
+
+    def _check_frame(self, frame_id: str) -> None:
+        if frame_id != self.frame_id:
+            raise MessageError("wrong_frame", f"frame '{frame_id}', expected '{self.frame_id}'")
+
+    def _truth(self, msg: NavSatFix) -> bool:
+        fix = navsatfix_to_truth(msg, self.site)
+        return self.evaluator.add_truth(fix.t, fix.e, fix.n, fix.u)
+
+    def _radar_raw(self, msg: PoseWithCovarianceStamped) -> bool:
+        m = msg_to_radar_measurement(msg, self.frame_id)
+        return self.evaluator.add_radar_report(m.t, *(float(v) for v in m.z))
+
+    def _rf(self, msg: PointStamped) -> bool:
+        self._check_frame(msg.header.frame_id)
+        if is_failed_rf(msg):
+            t = time_from_stamp(msg.header.stamp)
+            if t == 0.0:
+                raise MessageError("zero_stamp", "message has no stamp (0)")
+            return self.evaluator.add_rf_attempt(t, False)
+        m = msg_to_rf_measurement(msg, self.frame_id)
+        assert m is not None  # failed attempts handled above
+        return self.evaluator.add_rf_attempt(m.t, True, float(m.z[0]), float(m.z[1]))
+
+    def _accepted_radar(self, msg: PoseWithCovarianceStamped) -> bool:
+        m = msg_to_radar_measurement(msg, self.frame_id)
+        return self.evaluator.add_validated(m.t, "radar", m.z)
+
+    def _accepted_rf(self, msg: PointStamped) -> bool:
+        m = msg_to_rf_measurement(msg, self.frame_id)
+        if m is None:
+            raise MessageError("nan", "an accepted RF measurement cannot be a failed attempt")
+        return self.evaluator.add_validated(m.t, "rf", m.z)
+
+    def _step(self, msg: Odometry, status: str) -> bool:
+        self._check_frame(msg.header.frame_id)
+        s = odometry_to_state(msg)
+        if s.t == 0.0:
+            raise MessageError("zero_stamp", "message has no stamp (0)")
+        return self.evaluator.add_step(s.t, status, s.x)
+
+    def _on_truth(self, msg: NavSatFix) -> None:
+        self._guard(self.truth_topic, self._truth, msg)
+
+    def _on_radar_raw(self, msg: PoseWithCovarianceStamped) -> None:
+        self._guard(self.radar_raw_topic, self._radar_raw, msg)
+
+    def _on_rf(self, msg: PointStamped) -> None:
+        self._guard(self.rf_topic, self._rf, msg)
+
+    def _on_accepted_radar(self, msg: PoseWithCovarianceStamped) -> None:
+        self._guard(self.accepted_radar_topic, self._accepted_radar, msg)
+
+    def _on_accepted_rf(self, msg: PointStamped) -> None:
+        self._guard(self.accepted_rf_topic, self._accepted_rf, msg)
+
+    def _on_updated(self, msg: Odometry) -> None:
+        self._guard(self.updated_topic, lambda m: self._step(m, UPDATED), msg)
+
+    def _on_coasted(self, msg: Odometry) -> None:
+        self._guard(self.coasted_topic, lambda m: self._step(m, COASTED), msg)
+
+    # --- output ----------------------------------------------------------------------------
+    def evaluate(self) -> Evaluation:
+        """Score everything received so far (message drops merged into the drop counts)."""
+        with self._lock:
+            ev = self.evaluator.evaluate()
+        dropped = dict(ev.dropped)
+        for k, v in self.dropped.items():
+            dropped[k] = dropped.get(k, 0) + v
+        return _with_dropped(ev, dropped)
+
+    def _on_timer(self) -> None:
+        ev = self.evaluate()
+        self.get_logger().info(rows_summary(ev))
+        self.diag_pub.publish(self.diagnostics(ev))
+
+    def diagnostics(self, ev: Evaluation) -> DiagnosticArray:
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        for r in ev.rows:
+            st = DiagnosticStatus()
+            st.level = DiagnosticStatus.OK
+            st.name = f"{self.get_name()}: {r.spec.label}"
+            st.hardware_id = "uav_fusion"
+            st.message = (
+                f"n={r.stats.count} mean={_num(r.stats.mean)} m "
+                f"coverage={_num(r.stats.coverage_pct)} %"
+            )
+            values = {**r.as_dict()}
+            st.values = [
+                KeyValue(key=str(k), value=str(v))
+                for k, v in values.items()
+                if k not in ("key", "label", "group")
+            ]
+            arr.status.append(st)
+        inp = DiagnosticStatus()
+        inp.name = f"{self.get_name()}: inputs"
+        inp.hardware_id = "uav_fusion"
+        n_drop = sum(ev.dropped.values())
+        inp.level = DiagnosticStatus.WARN if n_drop else DiagnosticStatus.OK
+        inp.message = f"{sum(self.received.values())} messages, {n_drop} dropped"
+        inp.values = [KeyValue(key=f"received {k}", value=str(v)) for k, v in
+                      sorted(self.received.items())]
+        inp.values += [KeyValue(key=f"dropped {k}", value=str(v)) for k, v in
+                       sorted(ev.dropped.items())]
+        arr.status.append(inp)
+        return arr
+
+    def write_report(self) -> ReportFiles:
+        ev = self.evaluate()
+        info = {
+            "mode": f"live ({NODE_NAME})",
+            "flight": self.flight_name or "(not given)",
+            "site": str(self.site.source or self.site.name),
+            "messages received": ", ".join(f"{k} {v}" for k, v in sorted(self.received.items()))
+            or "none",
+        }
+        files = write_report(ev, self.output_dir, self.site, info, figures=self.figures)
+        self.last_report = files
+        return files
+
+    def _on_write_report(
+        self, request: Trigger.Request, response: Trigger.Response
+    ) -> Trigger.Response:
+        try:
+            files = self.write_report()
+        except (UavFusionError, OSError) as exc:
+            response.success = False
+            response.message = str(exc)
+            self.get_logger().error(f"report not written: {exc}")
+            return response
+        response.success = True
+        response.message = str(files.markdown)
+        self.get_logger().info(f"report written to {files.folder}")
+        return response
+
+
+def _num(v: float) -> str:
+    return "-" if not math.isfinite(v) else f"{v:.1f}"
+
+
+def _with_dropped(ev: Evaluation, dropped: dict[str, int]) -> Evaluation:
+    from dataclasses import replace
+
+    return replace(ev, dropped=dropped)
+
+
+def main(args: list[str] | None = None) -> int:
+    rclpy.init(args=args)
+    node: EvaluatorNode | None = None
+    try:
+        node = EvaluatorNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except UavFusionError as exc:
+        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        try_shutdown()
+        return 2
+    finally:
+        if node is not None:
+            if node.write_on_shutdown:
+                try:
+                    files = node.write_report()
+                    print(f"{NODE_NAME}: report written to {files.folder}", file=sys.stderr)
+                except (UavFusionError, OSError) as exc:
+                    print(f"{NODE_NAME}: report not written: {exc}", file=sys.stderr)
+            node.destroy_node()
+        try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
