@@ -157,11 +157,7 @@ class ReorderBuffer(Generic[T]):
         head = heapq.heappop(self._heap)
         items = [head.item]
         if head.source in self.grouped:
-            while (
-                self._heap
-                and self._heap[0].source == head.source
-                and self._heap[0].t == head.t
-            ):
+            while self._heap and self._heap[0].source == head.source and self._heap[0].t == head.t:
                 items.append(heapq.heappop(self._heap).item)
         self._released = (head.t, head.rank)
         self.released_count += len(items)

@@ -1,0 +1,295 @@
+"""The replay timeline shared by radar_replay, rf_replay and truth_replay.
+
+A replay publishes recorded messages stamped with their sensor (UTC) time. When they are
+*published* is decided by a :class:`ReplayDriver`:
+
+- ``rate > 0``: sensor time advances ``rate`` times as fast as the wall clock from the
+  flight's first time (1.0 = real time); every event whose time (plus the stream's
+  ``delay_s``) has been reached is published.
+- ``rate = 0``: as fast as the subscribers keep up, without loss: a batch of at most
+  ``batch_size`` events is published only after every earlier message was acknowledged by the
+  subscribers (reliable QoS) and, inside one process, after the consumers report they have
+  taken them (``drained`` hook, used by ``graph``).
+- *follow*: a replay that does not publish ``/clock`` but runs with ``use_sim_time`` publishes
+  every event whose time has been reached by the simulated clock, so several replay
+  processes share the timeline of the one that publishes ``/clock``.
+
+The driver that publishes ``/clock`` sends the current sensor time there (``rosgraph_msgs/
+Clock``); with ``rate > 0`` it keeps advancing after the last event so that time-driven
+consumers (reorder windows) see time pass. Before the first event, a driver waits until
+every data publisher has at least one subscriber, for up to ``wait_for_subscribers_s``.
+
+In ``graph`` all three replays register their events with one driver, which publishes them
+in one global time order.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from uav_fusion.conversions import ns_to_time, stamp_from_time
+from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.records import Flight
+from uav_fusion.core.site import Site, load_site
+from uav_fusion.params import Param, not_empty
+from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+
+
+def stream_qos(depth: int) -> QoSProfile:
+    """QoS of every replay and fusion stream: reliable, keep last ``depth``, volatile."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.VOLATILE,
+    )
+
+
+CLOCK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
+)
+
+
+def replay_params(publish_clock: bool) -> list[Param]:
+    """Parameters every replay node declares."""
+    return [
+        Param("flight_dir", "", "flight folder in the Dataset-28 layout ('' = bundled default)"),
+        Param("site_file", "", "site YAML ('' = bundled Lake Wheeler site)"),
+        Param("frame_id", "", "ENU frame id of published positions ('' = the site's frame_id)"),
+        Param(
+            "rate",
+            1.0,
+            "replay speed: 1.0 real time, >1 faster, 0 = as fast as lossless",
+            lo=0.0,
+            hi=10000.0,
+            read_only=True,
+        ),
+        Param("publish_clock", publish_clock, "publish /clock (drive the shared timeline)"),
+        Param(
+            "clock_period_s",
+            0.02,
+            "wall seconds between /clock messages and timer ticks",
+            lo=0.001,
+            hi=1.0,
+        ),
+        Param(
+            "wait_for_subscribers_s",
+            10.0,
+            "wall seconds to wait for subscribers before the first message (0 = do not wait)",
+            lo=0.0,
+            hi=3600.0,
+        ),
+        Param(
+            "delay_s",
+            0.0,
+            "publish each message this many sensor seconds after its stamp (tests lateness)",
+            lo=0.0,
+            hi=3600.0,
+        ),
+        Param("batch_size", 50, "events per batch when rate = 0", lo=1, hi=100000),
+        Param("qos_depth", 1000, "history depth of the reliable streams", lo=1, hi=1000000),
+        Param(
+            "exit_when_done",
+            False,
+            "stop the node once every message is published and acknowledged",
+        ),
+    ]
+
+
+def topic_param(name: str, default: str, what: str) -> Param:
+    return Param(name, default, what, check=not_empty)
+
+
+def load_replay_flight(flight_dir: str, site_file: str) -> tuple[Site, Flight]:
+    """The site and the flight a replay node works on (bundled defaults for '')."""
+    site = load_site(site_file or None)
+    folder = Path(flight_dir) if flight_dir else data_path(DEFAULT_FLIGHT)
+    return site, load_flight(folder, site)
+
+
+def flight_span(flight: Flight) -> tuple[float, float]:
+    """First and last time of any record of the flight."""
+    ts = [f.t for f in flight.truth] + [f.t for f in flight.radar] + [a.t for a in flight.rf]
+    if not ts:
+        return 0.0, 0.0
+    return min(ts), max(ts)
+
+
+@dataclass(order=True)
+class ReplayEvent:
+    """One message to publish: when (sensor time ``due``), in which order, where and what."""
+
+    due: float
+    order: int
+    publisher: Publisher = field(compare=False)
+    msg: Any = field(compare=False)
+
+
+class ReplayDriver:
+    """Publishes :class:`ReplayEvent` s on one timeline from a timer of ``node``."""
+
+    def __init__(
+        self,
+        node: Node,
+        *,
+        rate: float,
+        publish_clock: bool,
+        clock_period_s: float,
+        wait_for_subscribers_s: float,
+        batch_size: int,
+        span: tuple[float, float],
+        follow_sim_time: bool = False,
+        drained: Callable[[], bool] | None = None,
+        on_done: Callable[[], None] | None = None,
+    ) -> None:
+        self.node = node
+        self.rate = float(rate)
+        self.follow = bool(follow_sim_time) and not publish_clock
+        self.batch_size = int(batch_size)
+        self.wait_s = float(wait_for_subscribers_s)
+        self.t_start, self.t_end = span
+        self.drained = drained
+        self.on_done = on_done
+        self.events: list[ReplayEvent] = []
+        self._publishers: list[Publisher] = []
+        self.published: dict[int, int] = {}  # id(publisher) -> messages published
+        self._next = 0
+        self._order = 0
+        self._state = "idle"
+        self._wall0 = 0.0
+        self._wait_started = 0.0
+        self._clock_t = -math.inf
+        self.done = False
+        self.clock_pub = (
+            node.create_publisher(Clock, "/clock", CLOCK_QOS) if publish_clock else None
+        )
+        self._period = float(clock_period_s)
+        self._timer = node.create_timer(self._period, self._tick)
+
+    # --- set-up ---------------------------------------------------------------------------
+    def add(
+        self, publisher: Publisher, items: Sequence[tuple[float, Any]], delay_s: float = 0.0
+    ) -> None:
+        """Register messages (sensor time, message) for ``publisher``; keeps their order."""
+        if self._state != "idle":
+            raise RuntimeError("events must be added before the replay starts")
+        if publisher not in self._publishers:
+            self._publishers.append(publisher)
+            self.published[id(publisher)] = 0
+        for t, msg in items:
+            self.events.append(ReplayEvent(t + delay_s, self._order, publisher, msg))
+            self._order += 1
+
+    def start(self) -> None:
+        """Sort the timeline and begin (waiting for subscribers first)."""
+        self.events.sort()
+        self._state = "waiting"
+        self._wait_started = time.monotonic()
+        if self.events:
+            self.t_start = min(self.t_start, self.events[0].due)
+        if self.clock_pub is not None:
+            self._publish_clock(self.t_start)
+
+    # --- progress -------------------------------------------------------------------------
+    @property
+    def remaining(self) -> int:
+        return len(self.events) - self._next
+
+    def published_to(self, publisher: Publisher) -> int:
+        return self.published.get(id(publisher), 0)
+
+    def _subscribers_ready(self) -> bool:
+        return all(p.get_subscription_count() > 0 for p in self._publishers)
+
+    def _publish_clock(self, t: float) -> None:
+        if self.clock_pub is None or t <= self._clock_t:
+            return
+        self._clock_t = t
+        msg = Clock()
+        msg.clock = stamp_from_time(t)
+        self.clock_pub.publish(msg)
+
+    def _horizon(self) -> float:
+        if self.follow:
+            ns = self.node.get_clock().now().nanoseconds
+            return -math.inf if ns == 0 else ns_to_time(ns)
+        if self.rate == 0.0:
+            return math.inf
+        return self.t_start + (time.monotonic() - self._wall0) * self.rate
+
+    def _all_acked(self) -> bool:
+        zero = Duration(seconds=0)
+        return all(p.wait_for_all_acked(zero) for p in self._publishers)
+
+    def _tick(self) -> None:
+        if self._state == "finished":
+            if self.clock_pub is not None and self.rate > 0.0:
+                self._publish_clock(self._horizon())  # time goes on after the last event
+            return
+        if self._state == "waiting":
+            ready = self._subscribers_ready()
+            if not ready and time.monotonic() - self._wait_started < self.wait_s:
+                return
+            if not ready:
+                missing = [
+                    p.topic_name for p in self._publishers if p.get_subscription_count() == 0
+                ]
+                self.node.get_logger().warning(
+                    f"no subscriber after {self.wait_s:g} s on {', '.join(missing)}; "
+                    "publishing anyway"
+                )
+            self._state = "running"
+            self._wall0 = time.monotonic()
+            self.node.get_logger().info(
+                f"replaying {len(self.events)} messages at rate {self.rate:g}"
+                + (" following /clock" if self.follow else "")
+            )
+        if self._state == "running":
+            self._run()
+
+    def _run(self) -> None:
+        limit = len(self.events)
+        if self.rate == 0.0 and not self.follow:
+            if not self._all_acked() or (self.drained is not None and not self.drained()):
+                return
+            limit = self.batch_size
+        horizon = self._horizon()
+        n = 0
+        while self._next < len(self.events) and n < limit:
+            ev = self.events[self._next]
+            if ev.due > horizon:
+                break
+            self._publish_clock(ev.due)  # the clock never runs ahead of a pending event
+            ev.publisher.publish(ev.msg)
+            self.published[id(ev.publisher)] += 1
+            self._next += 1
+            n += 1
+        if math.isfinite(horizon):
+            self._publish_clock(horizon)
+        if self._next >= len(self.events):
+            self._state = "finished"
+            self.done = True
+            self._publish_clock(self.t_end)
+            self.node.get_logger().info(f"replay finished: {len(self.events)} messages")
+            if self.on_done is not None:
+                self.on_done()
+
+    def wait_acked(self, timeout_s: float) -> bool:
+        """Block until every published message is acknowledged (or the timeout passes)."""
+        deadline = Duration(seconds=timeout_s)
+        return all(p.wait_for_all_acked(deadline) for p in self._publishers)
+
+    def destroy(self) -> None:
+        self._timer.cancel()
+        self.node.destroy_timer(self._timer)
