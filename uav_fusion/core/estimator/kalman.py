@@ -1,0 +1,348 @@
+"""The filter's arithmetic: CV prediction and position updates written out element-wise.
+
+The matrices are tiny (6x6 state, 2x2/3x3 innovation), so a generic matrix library spends
+most of its time in call overhead. This module exploits the structure instead:
+
+* prediction with ``F(T) = [[I, T I], [0, I]]`` and the continuous white-noise acceleration
+  ``Q(T)`` (diagonal per axis) touches each upper-triangle element of ``P`` once;
+* ``H = [I_m 0]`` means ``HPH^T`` is the top-left block of ``P`` and ``PH^T`` its first
+  ``m`` columns;
+* the 2x2 / 3x3 innovation covariance is inverted in closed form;
+* the Joseph form ``(I-KH) P (I-KH)^T + K R K^T`` with ``K = P H^T S^-1`` is evaluated as
+  ``P - (HP)^T J (HP)`` with ``J = 2 S^-1 - S^-1 S S^-1``, which is the same expression
+  multiplied out (exact for whatever ``S^-1`` was computed, so it keeps the Joseph form's
+  tolerance of gain errors); only the upper triangle is computed and mirrored, so ``P`` stays
+  exactly symmetric.
+
+State is held in Python lists (``x``: 6 floats, ``P``: 36 floats, row-major, symmetric).
+:mod:`uav_fusion.core.estimator.models` has the plain matrix version the tests compare with.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+# R packed as the upper triangle: 3D (r00, r01, r02, r11, r12, r22), 2D (r00, r01, r11)
+PackedR = tuple[float, ...]
+
+
+def pack_r(R: FloatArray) -> PackedR:
+    """Upper triangle of a symmetric 2x2 or 3x3 ``R`` as a tuple (after symmetrising)."""
+    a = np.asarray(R, dtype=float)
+    a = 0.5 * (a + a.T)
+    v: tuple[float, ...]
+    if a.shape == (3, 3):
+        v = (a[0, 0], a[0, 1], a[0, 2], a[1, 1], a[1, 2], a[2, 2])
+    elif a.shape == (2, 2):
+        v = (a[0, 0], a[0, 1], a[1, 1])
+    else:
+        raise ValueError(f"R must be 2x2 or 3x3, got shape {a.shape}")
+    # plain floats: numpy scalars would make every operation of the filter several times slower
+    return tuple(float(e) for e in v)
+
+
+class CvKalman:
+    """Six-state constant-velocity Kalman filter for 2D/3D position measurements."""
+
+    __slots__ = ("P", "q", "x")
+
+    def __init__(self, q: tuple[float, float, float]) -> None:
+        self.q = (float(q[0]), float(q[1]), float(q[2]))
+        self.x: list[float] = [0.0] * 6
+        self.P: list[float] = [0.0] * 36
+
+    # --- state access -------------------------------------------------------------------
+    def set_state(self, x: FloatArray | list[float], P: FloatArray | list[list[float]]) -> None:
+        xa = np.asarray(x, dtype=float).reshape(6)
+        Pa = np.asarray(P, dtype=float).reshape(6, 6)
+        Pa = 0.5 * (Pa + Pa.T)
+        self.x = [float(v) for v in xa]
+        self.P = [float(v) for v in Pa.reshape(36)]
+
+    def x_array(self) -> FloatArray:
+        return np.array(self.x)
+
+    def P_array(self) -> FloatArray:
+        return np.array(self.P).reshape(6, 6)
+
+    # --- prediction ---------------------------------------------------------------------
+    def predict(self, T: float) -> None:
+        """Propagate state and covariance over ``T`` seconds (``T`` may be 0)."""
+        if T == 0.0:
+            return
+        x = self.x
+        x[0] += T * x[3]
+        x[1] += T * x[4]
+        x[2] += T * x[5]
+        qx, qy, qz = self.q
+        T2 = T * T
+        q3 = T2 * T / 3.0
+        q2 = 0.5 * T2
+        p = self.P
+        # old values needed (upper triangle); B = pos-vel block, C = vel-vel block
+        b00, b01, b02 = p[3], p[4], p[5]
+        b10, b11, b12 = p[9], p[10], p[11]
+        b20, b21, b22 = p[15], p[16], p[17]
+        c00, c01, c02 = p[21], p[22], p[23]
+        c11, c12 = p[28], p[29]
+        c22 = p[35]
+        # A' = A + T (B + B^T) + T^2 C + Q_pp
+        a00 = p[0] + T * (b00 + b00) + T2 * c00 + qx * q3
+        a01 = p[1] + T * (b01 + b10) + T2 * c01
+        a02 = p[2] + T * (b02 + b20) + T2 * c02
+        a11 = p[7] + T * (b11 + b11) + T2 * c11 + qy * q3
+        a12 = p[8] + T * (b12 + b21) + T2 * c12
+        a22 = p[14] + T * (b22 + b22) + T2 * c22 + qz * q3
+        p[0] = a00
+        p[1] = p[6] = a01
+        p[2] = p[12] = a02
+        p[7] = a11
+        p[8] = p[13] = a12
+        p[14] = a22
+        # B' = B + T C + Q_pv
+        v = b00 + T * c00 + qx * q2
+        p[3] = p[18] = v
+        v = b01 + T * c01
+        p[4] = p[24] = v
+        v = b02 + T * c02
+        p[5] = p[30] = v
+        v = b10 + T * c01
+        p[9] = p[19] = v
+        v = b11 + T * c11 + qy * q2
+        p[10] = p[25] = v
+        v = b12 + T * c12
+        p[11] = p[31] = v
+        v = b20 + T * c02
+        p[15] = p[20] = v
+        v = b21 + T * c12
+        p[16] = p[26] = v
+        v = b22 + T * c22 + qz * q2
+        p[17] = p[32] = v
+        # C' = C + Q_vv
+        p[21] = c00 + qx * T
+        p[28] = c11 + qy * T
+        p[35] = c22 + qz * T
+
+    # --- 3D position measurement (radar) -----------------------------------------------------
+    def nis3(self, z0: float, z1: float, z2: float, r: PackedR) -> float:
+        """Normalised innovation squared of a 3D position against the current prediction."""
+        p = self.P
+        x = self.x
+        s00 = p[0] + r[0]
+        s01 = p[1] + r[1]
+        s02 = p[2] + r[2]
+        s11 = p[7] + r[3]
+        s12 = p[8] + r[4]
+        s22 = p[14] + r[5]
+        i00 = s11 * s22 - s12 * s12
+        i01 = s02 * s12 - s01 * s22
+        i02 = s01 * s12 - s02 * s11
+        det = s00 * i00 + s01 * i01 + s02 * i02
+        i11 = s00 * s22 - s02 * s02
+        i12 = s01 * s02 - s00 * s12
+        i22 = s00 * s11 - s01 * s01
+        y0 = z0 - x[0]
+        y1 = z1 - x[1]
+        y2 = z2 - x[2]
+        return (
+            y0 * (i00 * y0 + i01 * y1 + i02 * y2)
+            + y1 * (i01 * y0 + i11 * y1 + i12 * y2)
+            + y2 * (i02 * y0 + i12 * y1 + i22 * y2)
+        ) / det
+
+    def update3(
+        self, z0: float, z1: float, z2: float, r: PackedR, gate: float = float("inf")
+    ) -> float:
+        """Joseph-form update with a 3D position; returns the NIS of the innovation.
+
+        With ``gate`` given, a measurement whose NIS exceeds it leaves the state untouched
+        (the caller sees the NIS and knows it was rejected).
+        """
+        p = self.P
+        x = self.x
+        s00 = p[0] + r[0]
+        s01 = p[1] + r[1]
+        s02 = p[2] + r[2]
+        s11 = p[7] + r[3]
+        s12 = p[8] + r[4]
+        s22 = p[14] + r[5]
+        i00 = s11 * s22 - s12 * s12
+        i01 = s02 * s12 - s01 * s22
+        i02 = s01 * s12 - s02 * s11
+        d = 1.0 / (s00 * i00 + s01 * i01 + s02 * i02)
+        i00 *= d
+        i01 *= d
+        i02 *= d
+        i11 = (s00 * s22 - s02 * s02) * d
+        i12 = (s01 * s02 - s00 * s12) * d
+        i22 = (s00 * s11 - s01 * s01) * d
+        y0 = z0 - x[0]
+        y1 = z1 - x[1]
+        y2 = z2 - x[2]
+        u0 = i00 * y0 + i01 * y1 + i02 * y2
+        u1 = i01 * y0 + i11 * y1 + i12 * y2
+        u2 = i02 * y0 + i12 * y1 + i22 * y2
+        nis = y0 * u0 + y1 * u1 + y2 * u2
+        if not nis <= gate:  # also rejects NaN
+            return nis
+        # rows of HP (the first rows of P)
+        h00, h01, h02, h03, h04, h05 = p[0:6]
+        h10, h11, h12, h13, h14, h15 = p[6:12]
+        h20, h21, h22, h23, h24, h25 = p[12:18]
+        # x += (HP)^T S^-1 y
+        x[0] += h00 * u0 + h10 * u1 + h20 * u2
+        x[1] += h01 * u0 + h11 * u1 + h21 * u2
+        x[2] += h02 * u0 + h12 * u1 + h22 * u2
+        x[3] += h03 * u0 + h13 * u1 + h23 * u2
+        x[4] += h04 * u0 + h14 * u1 + h24 * u2
+        x[5] += h05 * u0 + h15 * u1 + h25 * u2
+        # M = S^-1 S, J = 2 S^-1 - M S^-1 (the Joseph form's middle factor)
+        m00 = i00 * s00 + i01 * s01 + i02 * s02
+        m01 = i00 * s01 + i01 * s11 + i02 * s12
+        m02 = i00 * s02 + i01 * s12 + i02 * s22
+        m10 = i01 * s00 + i11 * s01 + i12 * s02
+        m11 = i01 * s01 + i11 * s11 + i12 * s12
+        m12 = i01 * s02 + i11 * s12 + i12 * s22
+        m20 = i02 * s00 + i12 * s01 + i22 * s02
+        m21 = i02 * s01 + i12 * s11 + i22 * s12
+        m22 = i02 * s02 + i12 * s12 + i22 * s22
+        j00 = 2.0 * i00 - (m00 * i00 + m01 * i01 + m02 * i02)
+        j01 = 2.0 * i01 - (m00 * i01 + m01 * i11 + m02 * i12)
+        j02 = 2.0 * i02 - (m00 * i02 + m01 * i12 + m02 * i22)
+        j11 = 2.0 * i11 - (m10 * i01 + m11 * i11 + m12 * i12)
+        j12 = 2.0 * i12 - (m10 * i02 + m11 * i12 + m12 * i22)
+        j22 = 2.0 * i22 - (m20 * i02 + m21 * i12 + m22 * i22)
+        # V = J (HP)
+        v00 = j00 * h00 + j01 * h10 + j02 * h20
+        v01 = j00 * h01 + j01 * h11 + j02 * h21
+        v02 = j00 * h02 + j01 * h12 + j02 * h22
+        v03 = j00 * h03 + j01 * h13 + j02 * h23
+        v04 = j00 * h04 + j01 * h14 + j02 * h24
+        v05 = j00 * h05 + j01 * h15 + j02 * h25
+        v10 = j01 * h00 + j11 * h10 + j12 * h20
+        v11 = j01 * h01 + j11 * h11 + j12 * h21
+        v12 = j01 * h02 + j11 * h12 + j12 * h22
+        v13 = j01 * h03 + j11 * h13 + j12 * h23
+        v14 = j01 * h04 + j11 * h14 + j12 * h24
+        v15 = j01 * h05 + j11 * h15 + j12 * h25
+        v20 = j02 * h00 + j12 * h10 + j22 * h20
+        v21 = j02 * h01 + j12 * h11 + j22 * h21
+        v22 = j02 * h02 + j12 * h12 + j22 * h22
+        v23 = j02 * h03 + j12 * h13 + j22 * h23
+        v24 = j02 * h04 + j12 * h14 + j22 * h24
+        v25 = j02 * h05 + j12 * h15 + j22 * h25
+        # P -= (HP)^T V: upper triangle, mirrored
+        p[0] = p[0] - (h00 * v00 + h10 * v10 + h20 * v20)
+        p[1] = p[6] = p[1] - (h00 * v01 + h10 * v11 + h20 * v21)
+        p[2] = p[12] = p[2] - (h00 * v02 + h10 * v12 + h20 * v22)
+        p[3] = p[18] = p[3] - (h00 * v03 + h10 * v13 + h20 * v23)
+        p[4] = p[24] = p[4] - (h00 * v04 + h10 * v14 + h20 * v24)
+        p[5] = p[30] = p[5] - (h00 * v05 + h10 * v15 + h20 * v25)
+        p[7] = p[7] - (h01 * v01 + h11 * v11 + h21 * v21)
+        p[8] = p[13] = p[8] - (h01 * v02 + h11 * v12 + h21 * v22)
+        p[9] = p[19] = p[9] - (h01 * v03 + h11 * v13 + h21 * v23)
+        p[10] = p[25] = p[10] - (h01 * v04 + h11 * v14 + h21 * v24)
+        p[11] = p[31] = p[11] - (h01 * v05 + h11 * v15 + h21 * v25)
+        p[14] = p[14] - (h02 * v02 + h12 * v12 + h22 * v22)
+        p[15] = p[20] = p[15] - (h02 * v03 + h12 * v13 + h22 * v23)
+        p[16] = p[26] = p[16] - (h02 * v04 + h12 * v14 + h22 * v24)
+        p[17] = p[32] = p[17] - (h02 * v05 + h12 * v15 + h22 * v25)
+        p[21] = p[21] - (h03 * v03 + h13 * v13 + h23 * v23)
+        p[22] = p[27] = p[22] - (h03 * v04 + h13 * v14 + h23 * v24)
+        p[23] = p[33] = p[23] - (h03 * v05 + h13 * v15 + h23 * v25)
+        p[28] = p[28] - (h04 * v04 + h14 * v14 + h24 * v24)
+        p[29] = p[34] = p[29] - (h04 * v05 + h14 * v15 + h24 * v25)
+        p[35] = p[35] - (h05 * v05 + h15 * v15 + h25 * v25)
+        return nis
+
+    # --- 2D position measurement (RF) ----------------------------------------------------
+    def nis2(self, z0: float, z1: float, r: PackedR) -> float:
+        """Normalised innovation squared of a 2D (east, north) position."""
+        p = self.P
+        x = self.x
+        s00 = p[0] + r[0]
+        s01 = p[1] + r[1]
+        s11 = p[7] + r[2]
+        y0 = z0 - x[0]
+        y1 = z1 - x[1]
+        return (s11 * y0 * y0 - 2.0 * s01 * y0 * y1 + s00 * y1 * y1) / (s00 * s11 - s01 * s01)
+
+    def update2(self, z0: float, z1: float, r: PackedR, gate: float = float("inf")) -> float:
+        """Joseph-form update with a 2D position; returns the NIS of the innovation.
+
+        With ``gate`` given, a measurement whose NIS exceeds it leaves the state untouched
+        (the caller sees the NIS and knows it was rejected).
+        """
+        p = self.P
+        x = self.x
+        s00 = p[0] + r[0]
+        s01 = p[1] + r[1]
+        s11 = p[7] + r[2]
+        d = 1.0 / (s00 * s11 - s01 * s01)
+        i00 = s11 * d
+        i01 = -s01 * d
+        i11 = s00 * d
+        y0 = z0 - x[0]
+        y1 = z1 - x[1]
+        u0 = i00 * y0 + i01 * y1
+        u1 = i01 * y0 + i11 * y1
+        nis = y0 * u0 + y1 * u1
+        if not nis <= gate:
+            return nis
+        # rows of HP (the first rows of P)
+        h00, h01, h02, h03, h04, h05 = p[0:6]
+        h10, h11, h12, h13, h14, h15 = p[6:12]
+        # x += (HP)^T S^-1 y
+        x[0] += h00 * u0 + h10 * u1
+        x[1] += h01 * u0 + h11 * u1
+        x[2] += h02 * u0 + h12 * u1
+        x[3] += h03 * u0 + h13 * u1
+        x[4] += h04 * u0 + h14 * u1
+        x[5] += h05 * u0 + h15 * u1
+        # M = S^-1 S, J = 2 S^-1 - M S^-1 (the Joseph form's middle factor)
+        m00 = i00 * s00 + i01 * s01
+        m01 = i00 * s01 + i01 * s11
+        m10 = i01 * s00 + i11 * s01
+        m11 = i01 * s01 + i11 * s11
+        j00 = 2.0 * i00 - (m00 * i00 + m01 * i01)
+        j01 = 2.0 * i01 - (m00 * i01 + m01 * i11)
+        j11 = 2.0 * i11 - (m10 * i01 + m11 * i11)
+        # V = J (HP)
+        v00 = j00 * h00 + j01 * h10
+        v01 = j00 * h01 + j01 * h11
+        v02 = j00 * h02 + j01 * h12
+        v03 = j00 * h03 + j01 * h13
+        v04 = j00 * h04 + j01 * h14
+        v05 = j00 * h05 + j01 * h15
+        v10 = j01 * h00 + j11 * h10
+        v11 = j01 * h01 + j11 * h11
+        v12 = j01 * h02 + j11 * h12
+        v13 = j01 * h03 + j11 * h13
+        v14 = j01 * h04 + j11 * h14
+        v15 = j01 * h05 + j11 * h15
+        # P -= (HP)^T V: upper triangle, mirrored
+        p[0] = p[0] - (h00 * v00 + h10 * v10)
+        p[1] = p[6] = p[1] - (h00 * v01 + h10 * v11)
+        p[2] = p[12] = p[2] - (h00 * v02 + h10 * v12)
+        p[3] = p[18] = p[3] - (h00 * v03 + h10 * v13)
+        p[4] = p[24] = p[4] - (h00 * v04 + h10 * v14)
+        p[5] = p[30] = p[5] - (h00 * v05 + h10 * v15)
+        p[7] = p[7] - (h01 * v01 + h11 * v11)
+        p[8] = p[13] = p[8] - (h01 * v02 + h11 * v12)
+        p[9] = p[19] = p[9] - (h01 * v03 + h11 * v13)
+        p[10] = p[25] = p[10] - (h01 * v04 + h11 * v14)
+        p[11] = p[31] = p[11] - (h01 * v05 + h11 * v15)
+        p[14] = p[14] - (h02 * v02 + h12 * v12)
+        p[15] = p[20] = p[15] - (h02 * v03 + h12 * v13)
+        p[16] = p[26] = p[16] - (h02 * v04 + h12 * v14)
+        p[17] = p[32] = p[17] - (h02 * v05 + h12 * v15)
+        p[21] = p[21] - (h03 * v03 + h13 * v13)
+        p[22] = p[27] = p[22] - (h03 * v04 + h13 * v14)
+        p[23] = p[33] = p[23] - (h03 * v05 + h13 * v15)
+        p[28] = p[28] - (h04 * v04 + h14 * v14)
+        p[29] = p[34] = p[29] - (h04 * v05 + h14 * v15)
+        p[35] = p[35] - (h05 * v05 + h15 * v15)
+        return nis
