@@ -321,3 +321,37 @@ def test_invalid_parameters_are_refused() -> None:
         Evaluator(tolerance_s=-1.0)
     with pytest.raises(ValueError):
         Evaluator(max_truth_gap_s=0.0)
+
+
+@dataclass
+class _FlaggedStep:
+    t: float
+    source: str
+    status: str
+    x: np.ndarray
+    seq: int
+    z: np.ndarray | None = None
+
+    @property
+    def updated(self) -> bool:
+        return self.status in ("updated", "initialised")
+
+    @property
+    def coasted(self) -> bool:
+        return self.status == "coasted"
+
+
+def test_steps_are_classed_by_their_updated_and_coasted_flags() -> None:
+    ev = Evaluator()
+    straight_truth(ev, duration=10.0)
+    p = np.array([*truth_at(T0 + 1.0), 0.0, 0.0, 0.0])
+    steps = [
+        _FlaggedStep(T0 + 1.0, "radar", "initialised", p, 0, z=p[:3] + np.array([0.0, 2.0, 0.0])),
+        _FlaggedStep(T0 + 1.0, "radar", "coasted", p, 1),
+        _FlaggedStep(T0 + 1.0, "radar", "reset", p, 2),
+    ]
+    feed_steps(ev, steps)
+    res = ev.evaluate()
+    assert res.step_status == {"updated": 1, "coasted": 1, "reset": 1}
+    assert res.row("radar_validated").stats.mean == pytest.approx(2.0)
+    assert res.steps == 2

@@ -519,18 +519,30 @@ def feed_flight(
         ev.add_rf_attempt(a.t, a.ok, a.e, a.n)
 
 
+def step_class(step: Any) -> str:
+    """Table II class of an estimator step: "updated" or "coasted" when the step says so
+    through its ``updated`` / ``coasted`` properties (an initialisation from an accepted
+    measurement is an update there), otherwise its ``status`` string."""
+    if getattr(step, "updated", False) is True:
+        return UPDATED
+    if getattr(step, "coasted", False) is True:
+        return COASTED
+    return str(step.status)
+
+
 def feed_steps(
     ev: Evaluator, steps: Iterable[Any], measurements: Iterable[Measurement] = ()
 ) -> None:
     """Feed filter steps; an ``updated`` step also feeds its accepted measurement.
 
     A step is any object with ``t``, ``source``, ``status`` and ``x`` (state, at least 3
-    values); the accepted measurement is the step's ``z`` when it has one, otherwise the
-    measurement of ``measurements`` with the step's ``source`` and ``seq``.
+    values), classed by :func:`step_class`. The accepted measurement is the step's ``z``
+    when it has one, otherwise the measurement of ``measurements`` with the step's
+    ``source`` and ``seq``.
     """
     by_seq = {(m.source, m.seq): m for m in measurements}
     for s in steps:
-        status = str(s.status)
+        status = step_class(s)
         ev.add_step(s.t, status, np.asarray(s.x, dtype=float).reshape(-1))
         if status != UPDATED:
             continue
