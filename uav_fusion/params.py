@@ -13,6 +13,7 @@ functions log it and exit with status 2.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -27,7 +28,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.errors import ConfigError, UavFusionError
 
 Check = Callable[[Any], str | None]  # returns an error text, or None if the value is fine
 
@@ -135,3 +136,45 @@ def positive(value: Any) -> str | None:
 def not_empty(value: Any) -> str | None:
     """A check: the string must not be empty (topic names, frames)."""
     return None if str(value).strip() else "must not be empty"
+
+
+def run_node(
+    factory: Callable[..., Node],
+    args: Sequence[str] | None = None,
+    *,
+    setup: Callable[[Node], None] | None = None,
+    done: Callable[[Node], bool] | None = None,
+) -> int:
+    """Shared ``main()`` of the nodes: init, build, spin until shutdown (or ``done``).
+
+    A :class:`~uav_fusion.core.errors.UavFusionError` while building (bad parameter, missing
+    file, unreadable data) is logged and gives exit status 2, never a traceback.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.utilities import ok, try_shutdown
+
+    rclpy.init(args=None if args is None else list(args))
+    node: Node | None = None
+    try:
+        try:
+            node = factory()
+            if setup is not None:
+                setup(node)
+        except UavFusionError as exc:
+            rclpy.logging.get_logger("uav_fusion").error(str(exc))
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while ok():
+            executor.spin_once(timeout_sec=0.1)
+            if done is not None and done(node):
+                break
+        return 0
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        if node is not None:
+            node.destroy_node()
+        try_shutdown()

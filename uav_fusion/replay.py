@@ -42,7 +42,7 @@ from uav_fusion.conversions import ns_to_time, stamp_from_time
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site, load_site
-from uav_fusion.params import Param, not_empty
+from uav_fusion.params import Param, declare_all, not_empty, run_node
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
 
@@ -293,3 +293,74 @@ class ReplayDriver:
     def destroy(self) -> None:
         self._timer.cancel()
         self.node.destroy_timer(self._timer)
+
+
+class ReplayNode(Node):
+    """Base of the replay nodes: parameters, the flight, and a driver of its own (or none).
+
+    Subclasses implement :meth:`streams`. Stand-alone (``ros2 run``), a node builds its own
+    :class:`ReplayDriver` with :meth:`start_standalone`; inside ``graph`` the caller hands the
+    streams of all replays to one shared driver instead.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        publish_clock: bool,
+        extra: Sequence[Param] = (),
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(name, **kwargs)
+        self.p = declare_all(self, [*replay_params(publish_clock), *extra])
+        self.site, self.flight = load_replay_flight(self.p["flight_dir"], self.p["site_file"])
+        self.frame_id: str = self.p["frame_id"] or self.site.frame_id
+        self.qos = stream_qos(int(self.p["qos_depth"]))
+        self.driver: ReplayDriver | None = None
+        self.finished = False
+
+    def streams(self) -> list[tuple[Publisher, list[tuple[float, Any]]]]:
+        """(publisher, [(sensor time, message), ...]) of every stream this node replays."""
+        raise NotImplementedError
+
+    def use_sim_time(self) -> bool:
+        return bool(self.get_parameter("use_sim_time").value)
+
+    def start_standalone(self) -> ReplayDriver:
+        """Build this node's own driver, register its streams and start."""
+        drv = ReplayDriver(
+            self,
+            rate=float(self.p["rate"]),
+            publish_clock=bool(self.p["publish_clock"]),
+            clock_period_s=float(self.p["clock_period_s"]),
+            wait_for_subscribers_s=float(self.p["wait_for_subscribers_s"]),
+            batch_size=int(self.p["batch_size"]),
+            span=flight_span(self.flight),
+            follow_sim_time=self.use_sim_time(),
+            on_done=self._on_done,
+        )
+        for pub, items in self.streams():
+            drv.add(pub, items, float(self.p["delay_s"]))
+        drv.start()
+        self.driver = drv
+        return drv
+
+    def _on_done(self) -> None:
+        self.finished = True
+
+
+def run_replay(factory: Callable[..., ReplayNode], args: Sequence[str] | None = None) -> int:
+    """``main()`` body of a replay node: start, spin, stop cleanly; 2 on a bad set-up."""
+
+    def setup(node: Node) -> None:
+        assert isinstance(node, ReplayNode)
+        node.start_standalone()
+
+    def done(node: Node) -> bool:
+        assert isinstance(node, ReplayNode)
+        if node.finished and node.p["exit_when_done"]:
+            assert node.driver is not None
+            node.driver.wait_acked(5.0)
+            return True
+        return False
+
+    return run_node(factory, args, setup=setup, done=done)
