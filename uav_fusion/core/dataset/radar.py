@@ -38,12 +38,13 @@ H_MIN, H_MAX = -500.0, 10000.0  # plausible ellipsoidal heights of a track, metr
 
 
 def _is_num(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool)
+    """A JSON number (``bool`` is not one; JSON gives exactly int or float)."""
+    return type(v) is float or type(v) is int
 
 
 def _finite(v: Any) -> float | None:
-    """A finite JSON number as float, else None (booleans are not numbers here)."""
-    if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v):
+    """A finite JSON number as float, else None."""
+    if (type(v) is float or type(v) is int) and math.isfinite(v):
         return float(v)
     return None
 
