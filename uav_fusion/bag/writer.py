@@ -239,6 +239,19 @@ class BagWriter:
             and stamp - self._part_start_ns >= self.max_duration_ns
         )
 
+    def flush(self) -> None:
+        """Put every message written so far on disk as a complete MCAP chunk, so that a
+        process killed later loses nothing written before this call (rosbags otherwise keeps up
+        to 1 MiB of messages in memory). A no-op when rosbags' MCAP writer changes shape."""
+        storage = getattr(self._writer, "storage", None)
+        chunk = getattr(storage, "chunk", None)
+        bio = getattr(chunk, "bio", None)
+        if storage is None or bio is None or not hasattr(storage, "close_chunk"):
+            return
+        if bio.tell() and getattr(chunk, "msgs", None):
+            storage.close_chunk()
+            storage.bio.flush()
+
     def close(self) -> WrittenBag:
         """Finish the open part and write the bag's ``metadata.yaml``. Idempotent."""
         if self.closed:

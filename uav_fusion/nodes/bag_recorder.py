@@ -96,6 +96,9 @@ class BagRecorder(Node):
         p("qos_depth", 0, _desc("subscription history depth (0: keep all, so a reliable "
                                 "publisher is slowed down rather than a message lost)",
                                 ParameterType.PARAMETER_INTEGER))
+        p("flush_period", 1.0, _desc(
+            "seconds between forced writes to disk (0: only when 1 MiB is buffered); bounds "
+            "what a killed recorder loses", ParameterType.PARAMETER_DOUBLE))
         p("discovery_period", 0.2, _desc("seconds between looks for new topics",
                                          ParameterType.PARAMETER_DOUBLE))
         g = self.get_parameter
@@ -126,6 +129,8 @@ class BagRecorder(Node):
             + ("all topics" if self.all_topics else ", ".join(sorted(self.wanted))))
         self._discover()
         self._timer = self.create_timer(float(g("discovery_period").value), self._discover)
+        flush = float(g("flush_period").value)
+        self._flush_timer = self.create_timer(flush, self._flush) if flush > 0 else None
 
     @property
     def path(self) -> str:
@@ -167,6 +172,11 @@ class BagRecorder(Node):
             self.create_subscription(cls, name, self._callback(name), qos, raw=True)
             self._subscribed.add(name)
             self.get_logger().info(f"subscribed to {name} [{msgtype}]")
+
+    def _flush(self) -> None:
+        with self._lock:
+            if self._closed is None:
+                self.writer.flush()
 
     def _refuse(self, name: str, why: str) -> None:
         self._refused.add(name)
