@@ -166,8 +166,11 @@ def test_wrong_header(tmp_path: Path, site: Site) -> None:
     assert rep.notes[0].startswith("line 1: header lacks column(s) 'Meas ID', 'Time'; found: 'ID'")
     assert rep.notes[0].endswith("no row could be read")
     err = strict_error(p, site)
+    found = ", ".join(repr(h.strip()) for h in bad.split(","))
     assert err.line == 1
-    assert err.what.startswith("header lacks column(s) 'Meas ID', 'Time'; found: 'ID', 'Algorithm'")
+    assert err.what == f"header lacks column(s) 'Meas ID', 'Time'; found: {found}"
+    assert found.startswith("'ID', 'Algorithm', 'Center Frequency', 'Sample Rate', 'Num Samples',")
+    assert rep.notes == [f"line 1: {err.what}; no row could be read"]
 
 
 def test_non_utf8_bytes(tmp_path: Path, site: Site) -> None:
