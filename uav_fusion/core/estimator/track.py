@@ -1,0 +1,365 @@
+"""The fusion estimator: one CV track fed asynchronously by radar and RF measurements.
+
+For each measurement, in the order given (callers sort by time, then ``seq``):
+
+1. out-of-order check (a measurement older than the track's time is discarded);
+2. when a track exists: the state is predicted to the measurement's time (for the continuous
+   white-noise acceleration model predicting in pieces equals predicting in one go, so this
+   never changes the result) and the coast-time limit is checked;
+3. pre-gates, which discard without touching the track: radar range gate (distance from the
+   radar's phase centre), optional UAV class-probability threshold;
+4. without a track: initialisation from the measurement if its source may start tracks;
+5. NIS gate at the profile's chi-square probability for the measurement's dimension:
+   accepted -> Joseph-form update; rejected -> coast (the prediction is the estimate);
+6. after ``max_consecutive_rejections`` NIS rejections in a row the track is restarted from
+   the measurement that hit the limit.
+
+Every measurement yields exactly one :class:`Step`. Statuses:
+
+* ``initialised`` / ``reset``: the track (re)started from this measurement (``reset`` when a
+  previous track was dropped; ``reason`` says why);
+* ``updated``: accepted and fused;
+* ``coasted``: rejected by the NIS gate; the estimate is the prediction;
+* ``discarded``: not a filter step at all (``range_gate``, ``class_prob``, ``not_selected``,
+  ``out_of_order``, ``no_track``, ``invalid``); the track is not changed.
+
+The paper's "KF all steps" are the non-discarded steps; its "updated estimates" the steps
+that used their measurement (updated, initialised, reset) and its "coasted estimates" the
+coasted steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+from scipy.stats import chi2
+
+from uav_fusion.core.estimator.kalman import CvKalman, PackedR, pack_r
+from uav_fusion.core.estimator.profile import Profile
+from uav_fusion.core.records import RADAR, RF, Measurement
+from uav_fusion.core.site import Site
+
+FloatArray = npt.NDArray[np.float64]
+
+UPDATED = "updated"
+COASTED = "coasted"
+INITIALISED = "initialised"
+RESET = "reset"
+DISCARDED = "discarded"
+STATUSES = (UPDATED, COASTED, INITIALISED, RESET, DISCARDED)
+USED = frozenset((UPDATED, INITIALISED, RESET))
+
+_NAN6 = (math.nan,) * 6
+_NAN36 = (math.nan,) * 36
+
+
+class Step:
+    """What the estimator did with one measurement, and the estimate at its time.
+
+    ``x`` (6,) and ``P`` (6, 6) are the state after this measurement (NaN when no track
+    exists); they are built on first access from the filter's internal copy.
+    """
+
+    __slots__ = (
+        "_P",
+        "_Pl",
+        "_x",
+        "_xl",
+        "dim",
+        "nis",
+        "reason",
+        "seq",
+        "source",
+        "status",
+        "t",
+        "track_id",
+    )
+
+    def __init__(
+        self,
+        t: float,
+        source: str,
+        status: str,
+        reason: str | None,
+        nis: float | None,
+        x: Sequence[float],
+        P: Sequence[float],
+        dim: int,
+        track_id: int | None,
+        seq: int,
+    ) -> None:
+        self.t = t
+        self.source = source
+        self.status = status
+        self.reason = reason
+        self.nis = nis
+        self._xl = x
+        self._Pl = P
+        self._x: FloatArray | None = None
+        self._P: FloatArray | None = None
+        self.dim = dim
+        self.track_id = track_id
+        self.seq = seq
+
+    @property
+    def x(self) -> FloatArray:
+        if self._x is None:
+            self._x = np.array(self._xl, dtype=float)
+        return self._x
+
+    @property
+    def P(self) -> FloatArray:
+        if self._P is None:
+            self._P = np.array(self._Pl, dtype=float).reshape(6, 6)
+        return self._P
+
+    @property
+    def updated(self) -> bool:
+        """The estimate used this measurement (updated, initialised or reset)."""
+        return self.status in USED
+
+    @property
+    def coasted(self) -> bool:
+        """The measurement failed the NIS gate; the estimate is the prediction."""
+        return self.status == COASTED
+
+    @property
+    def counted(self) -> bool:
+        """A filter step in the paper's sense (every status except ``discarded``)."""
+        return self.status != DISCARDED
+
+    def __repr__(self) -> str:
+        nis = "None" if self.nis is None else f"{self.nis:.3f}"
+        return (
+            f"Step(t={self.t:.3f}, source={self.source!r}, status={self.status!r}, "
+            f"reason={self.reason!r}, nis={nis}, dim={self.dim}, track_id={self.track_id}, "
+            f"seq={self.seq}, x={np.array2string(self.x, precision=2)})"
+        )
+
+
+class FusionEstimator:
+    """Streaming radar + RF fusion (one track). Feed measurements in (t, seq) order."""
+
+    def __init__(self, profile: Profile, site: Site) -> None:
+        self.profile = profile
+        self.site = site
+        self._kf = CvKalman(profile.q)
+        self._r: dict[str, PackedR] = {RADAR: pack_r(profile.r_radar), RF: pack_r(profile.r_rf)}
+        self.gate_threshold: dict[int, float] = {
+            d: float(chi2.ppf(profile.nis_probability, d)) for d in (2, 3)
+        }
+        self.range_gate_m = (
+            profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
+        )
+        self._radar_pos = tuple(float(v) for v in site.radar.enu)
+        self._init_sources = frozenset(profile.init_sources)
+        self._max_rej = profile.max_consecutive_rejections
+        self._max_coast = profile.max_coast_s
+        self.t: float | None = None  # time of the current estimate
+        self.active = False
+        self.last_used_t: float | None = None
+        self.consecutive_rejections = 0
+        self._pending_reset: str | None = None
+        self.counters: dict[str, int] = {}
+
+    # --- public API ---------------------------------------------------------------------
+    def reset(self, reason: str) -> None:
+        """Drop the track; the next usable measurement starts a new one (status ``reset``)."""
+        if self.active:
+            self._count(f"reset_{reason}")
+            self._count("reinitialisations")
+            self._pending_reset = reason
+        self.active = False
+        self.consecutive_rejections = 0
+
+    def state(self) -> tuple[FloatArray, FloatArray] | None:
+        """Current (x, P), or None without a track."""
+        if not self.active:
+            return None
+        return self._kf.x_array(), self._kf.P_array()
+
+    def process(self, m: Measurement) -> list[Step]:
+        """Process one measurement; returns the step it produced."""
+        self._count("measurements")
+        z = m.z.tolist()
+        pre = self._pre(m, z)
+        if pre is not None:
+            return [pre]
+        if not self.active:
+            return [self._initialise(m)]
+        nis = self._update(m, z, self._rp(m))
+        if nis <= self.gate_threshold[m.dim]:
+            return [self._used(m, nis)]
+        return [self._rejected(m, nis)]
+
+    def process_frame(self, ms: Sequence[Measurement]) -> list[Step]:
+        """Process the candidate reports of one radar frame (all with the same time).
+
+        Candidates are pre-gated individually; of the survivors the one with the smallest
+        NIS inside the gate updates the track (the others are ``not_selected``). If none is
+        inside the gate, the smallest-NIS candidate makes the frame's coasted step and the
+        others are discarded with reason ``nis``. Without a track, the survivor with the
+        highest UAV probability (then lowest ``seq``) starts one.
+        """
+        if len(ms) == 1:
+            return self.process(ms[0])
+        if not ms:
+            return []
+        cands = sorted(ms, key=lambda m: m.seq)
+        t0 = cands[0].t
+        if any(m.t != t0 for m in cands):
+            raise ValueError("process_frame: all candidates of a frame must share one time")
+        steps: dict[int, Step] = {}
+        survivors: list[Measurement] = []
+        zs: dict[int, list[float]] = {}
+        for m in cands:
+            self._count("measurements")
+            z = zs[m.seq] = m.z.tolist()
+            pre = self._pre(m, z)
+            if pre is None:
+                survivors.append(m)
+            else:
+                steps[m.seq] = pre
+        if survivors:
+            if not self.active:
+                best = max(
+                    survivors,
+                    key=lambda m: (-1.0 if m.uav_prob is None else m.uav_prob, -m.seq),
+                )
+                steps[best.seq] = self._initialise(best)
+                for m in survivors:
+                    if m is not best:
+                        steps[m.seq] = self._discard(m, "not_selected")
+            else:
+                kf = self._kf
+                scored = []
+                for m in survivors:
+                    z = zs[m.seq]
+                    r = self._rp(m)
+                    n = kf.nis3(z[0], z[1], z[2], r) if m.dim == 3 else kf.nis2(z[0], z[1], r)
+                    scored.append((n, m.seq, m, r))
+                scored.sort(key=lambda s: (s[0], s[1]))
+                n0, _, best, r0 = scored[0]
+                if n0 <= self.gate_threshold[best.dim]:
+                    self._update(best, zs[best.seq], r0)
+                    steps[best.seq] = self._used(best, n0)
+                    for n, _, m, _ in scored[1:]:
+                        steps[m.seq] = self._discard(m, "not_selected", n)
+                else:
+                    steps[best.seq] = self._rejected(best, n0)
+                    for n, _, m, _ in scored[1:]:
+                        steps[m.seq] = self._discard(m, "nis", n)
+        return [steps[m.seq] for m in cands]
+
+    # --- internals ----------------------------------------------------------------------
+    def _count(self, key: str, n: int = 1) -> None:
+        c = self.counters
+        c[key] = c.get(key, 0) + n
+
+    def _rp(self, m: Measurement) -> PackedR:
+        return self._r[m.source] if m.R is None else pack_r(m.R)
+
+    def _pre(self, m: Measurement, z: list[float]) -> Step | None:
+        """Time handling and pre-gates; a Step when the measurement goes no further."""
+        if m.source not in (RADAR, RF) or len(z) != (3 if m.source == RADAR else 2):
+            raise ValueError(f"measurement seq {m.seq}: {m.source!r} with {len(z)} values")
+        self._count(f"{m.source}_measurements")
+        if not all(math.isfinite(v) for v in z) or not math.isfinite(m.t):
+            return self._discard(m, "invalid")
+        if self.active:
+            assert self.t is not None
+            dt = m.t - self.t
+            if dt < 0:
+                return self._discard(m, "out_of_order")
+            if (
+                self._max_coast is not None
+                and self.last_used_t is not None
+                and m.t - self.last_used_t > self._max_coast
+            ):
+                self.reset("max_coast")
+            else:
+                self._kf.predict(dt)
+                self.t = m.t
+        elif self.t is not None and m.t < self.t:
+            return self._discard(m, "out_of_order")
+        if m.source == RADAR:
+            rx, ry, rz = self._radar_pos
+            d = math.sqrt((z[0] - rx) ** 2 + (z[1] - ry) ** 2 + (z[2] - rz) ** 2)
+            if not d <= self.range_gate_m:
+                return self._discard(m, "range_gate")
+            mp = self.profile.min_uav_prob
+            if mp is not None and (m.uav_prob is None or m.uav_prob < mp):
+                return self._discard(m, "class_prob")
+        if not self.active and m.source not in self._init_sources:
+            return self._discard(m, "no_track")
+        return None
+
+    def _update(self, m: Measurement, z: list[float], r: PackedR) -> float:
+        g = self.gate_threshold[m.dim]
+        if m.dim == 3:
+            return self._kf.update3(z[0], z[1], z[2], r, g)
+        return self._kf.update2(z[0], z[1], r, g)
+
+    def _snapshot(self, m: Measurement, status: str, reason: str | None, nis: float | None) -> Step:
+        kf = self._kf
+        if self.active:
+            x: Sequence[float] = tuple(kf.x)
+            P: Sequence[float] = tuple(kf.P)
+        else:
+            x, P = _NAN6, _NAN36
+        return Step(m.t, m.source, status, reason, nis, x, P, m.dim, m.track_id, m.seq)
+
+    def _discard(self, m: Measurement, reason: str, nis: float | None = None) -> Step:
+        self._count(DISCARDED)
+        self._count(f"rejected_{reason}")
+        return self._snapshot(m, DISCARDED, reason, nis)
+
+    def _used(self, m: Measurement, nis: float) -> Step:
+        self._count(UPDATED)
+        self._count(f"updated_{m.source}")
+        self.consecutive_rejections = 0
+        self.last_used_t = m.t
+        return self._snapshot(m, UPDATED, None, nis)
+
+    def _rejected(self, m: Measurement, nis: float) -> Step:
+        self._count(COASTED)
+        self._count(f"coasted_{m.source}")
+        self._count("rejected_nis")
+        self.consecutive_rejections += 1
+        n = self._max_rej
+        if n is not None and self.consecutive_rejections >= n:
+            self.reset("max_rejections")
+            if m.source in self._init_sources:
+                return self._initialise(m, nis)
+        return self._snapshot(m, COASTED, "nis", nis)
+
+    def _initialise(self, m: Measurement, nis: float | None = None) -> Step:
+        p = self.profile
+        z = m.z
+        R = np.asarray(p.r_radar if m.source == RADAR else p.r_rf, float) if m.R is None else m.R
+        x = np.zeros(6)
+        P = np.zeros((6, 6))
+        v = p.init_velocity_std_mps**2
+        P[3, 3] = P[4, 4] = P[5, 5] = v
+        if m.dim == 3:
+            x[:3] = z
+            P[:3, :3] = R
+        else:
+            x[:2] = z
+            x[2] = p.rf_init_altitude_m
+            P[:2, :2] = R
+            P[2, 2] = p.rf_init_altitude_std_m**2
+        self._kf.set_state(x, P)
+        self.active = True
+        self.t = m.t
+        self.last_used_t = m.t
+        self.consecutive_rejections = 0
+        reason = self._pending_reset
+        self._pending_reset = None
+        status = INITIALISED if reason is None else RESET
+        self._count(status)
+        self._count(f"{status}_{m.source}")
+        return self._snapshot(m, status, reason, nis)
