@@ -130,9 +130,9 @@ def read_radar_jsonl(
         if not T_MIN <= t_file <= T_MAX:
             src.bad(line, "bad_time", f"globalTime {t_file!r} is not a plausible unix time")
             continue
-        tracks = [tr for k, raw in enumerate(tdata) if (tr := _track(src, line, k, raw))]
         if not order.accept(t, line):
             continue
+        tracks = [tr for k, raw in enumerate(tdata) if (tr := _track(src, line, k, raw))]
         frames.append((t, line, tracks))
 
     all_tracks = [tr for _, _, trs in frames for tr in trs]

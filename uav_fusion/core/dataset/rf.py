@@ -102,11 +102,11 @@ def read_rf_csv(
             src.bad(line, "bad_time", f"Time {f[i_time].strip()!r} is not a plausible time")
             continue
         t = parsed[0] - (offset if parsed[1] != "zoned" else 0.0)
+        if not order.accept(t, line):
+            continue
         cep = _opt_float(src, line, f, i_cep, "CEP")
         tot = _opt_int(src, line, f, i_tot, "Total Sensors")
         val = _opt_int(src, line, f, i_val, "Valid Sensors")
-        if not order.accept(t, line):
-            continue
         kept.append((t, meas_id, lat, lon, cep, tot, val, line))
 
     lat_a = np.array([k[2] for k in kept], dtype=float)

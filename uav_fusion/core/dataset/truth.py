@@ -121,6 +121,8 @@ def read_truth(
             src.bad(line, "bad_time", f"timestamp {f[7].strip()!r} is not a plausible time")
             continue
         t = parsed[0] - (offset if parsed[1] != "zoned" else 0.0)
+        if not order.accept(t, line):
+            continue
         vel = _triple(f[5])
         if vel is None:
             src.soft(line, f"velocity {f[5].strip()!r} is not a (vN,vE,vD) tuple")
@@ -129,8 +131,6 @@ def read_truth(
         if sats is None:
             src.soft(line, f"num_sats {f[9].strip()!r} is not an integer")
             sats = -1
-        if not order.accept(t, line):
-            continue
         kinds[parsed[1]] += 1
         fix_types[fix] += 1
         kept.append((t, lat, lon, alt, vel, fix, sats, line))
