@@ -97,7 +97,15 @@ def replay_params(publish_clock: bool) -> list[Param]:
             lo=0.0,
             hi=3600.0,
         ),
-        Param("batch_size", 50, "events per batch when rate = 0", lo=1, hi=100000),
+        Param("batch_size", 50, "most events per batch when rate = 0", lo=1, hi=100000),
+        Param(
+            "batch_span_s",
+            0.5,
+            "most sensor seconds one batch spans when rate = 0 (keep below the fusion "
+            "node's reorder_window_s)",
+            lo=0.0,
+            hi=3600.0,
+        ),
         Param("qos_depth", 1000, "history depth of the reliable streams", lo=1, hi=1000000),
         Param(
             "exit_when_done",
@@ -149,6 +157,7 @@ class ReplayDriver:
         wait_for_subscribers_s: float,
         batch_size: int,
         span: tuple[float, float],
+        batch_span_s: float = math.inf,
         follow_sim_time: bool = False,
         drained: Callable[[], bool] | None = None,
         on_done: Callable[[], None] | None = None,
@@ -157,6 +166,7 @@ class ReplayDriver:
         self.rate = float(rate)
         self.follow = bool(follow_sim_time) and not publish_clock
         self.batch_size = int(batch_size)
+        self.batch_span_s = float(batch_span_s)
         self.wait_s = float(wait_for_subscribers_s)
         self.t_start, self.t_end = span
         self.drained = drained
@@ -260,11 +270,13 @@ class ReplayDriver:
 
     def _run(self) -> None:
         limit = len(self.events)
+        horizon = self._horizon()
         if self.rate == 0.0 and not self.follow:
             if not self._all_acked() or (self.drained is not None and not self.drained()):
                 return
             limit = self.batch_size
-        horizon = self._horizon()
+            if self._next < len(self.events):
+                horizon = self.events[self._next].due + self.batch_span_s
         n = 0
         while self._next < len(self.events) and n < limit:
             ev = self.events[self._next]
@@ -275,8 +287,8 @@ class ReplayDriver:
             self.published[id(ev.publisher)] += 1
             self._next += 1
             n += 1
-        if math.isfinite(horizon):
-            self._publish_clock(horizon)
+        if self.rate > 0.0 and not self.follow:
+            self._publish_clock(horizon)  # real-time pacing: time passes between events
         if self._next >= len(self.events):
             self._state = "finished"
             self.done = True
@@ -335,6 +347,7 @@ class ReplayNode(Node):
             wait_for_subscribers_s=float(self.p["wait_for_subscribers_s"]),
             batch_size=int(self.p["batch_size"]),
             span=flight_span(self.flight),
+            batch_span_s=float(self.p["batch_span_s"]),
             follow_sim_time=self.use_sim_time(),
             on_done=self._on_done,
         )

@@ -1,0 +1,229 @@
+"""graph: the whole node graph in one process, run once over a flight.
+
+Creates ``truth_replay``, ``rf_replay``, ``radar_replay``, ``fusion_node`` and (unless
+disabled) ``evaluator_node`` in one rclpy context, each reading its parameters as usual
+(``--ros-args --params-file config/graph.yaml``; node names are the sections). The three
+replays hand their streams to **one** :class:`~uav_fusion.replay.ReplayDriver`, so every
+message is published in one global time order on one timeline, and ``/clock`` follows it.
+The timeline's settings (``rate``, ``clock_period_s``, ``batch_size``,
+``wait_for_subscribers_s``) are ``truth_replay``'s; ``delay_s`` stays per replay.
+
+With ``rate = 0`` a batch is published only once the fusion and evaluator nodes have taken
+every earlier message, so nothing is lost and the run is as fast as the nodes allow.
+After the last message, the fusion node's reorder buffer is flushed, the graph waits until
+the evaluator has every output, writes the evaluator's report and exits.
+
+Messages go through DDS as between separate processes; the executor is single-threaded
+(``--threads N`` outside ``--ros-args`` selects a multi-threaded one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import Executor, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.utilities import get_default_context, remove_ros_args
+
+from uav_fusion.core.errors import UavFusionError
+from uav_fusion.core.records import RADAR, RF
+from uav_fusion.nodes.fusion_node import FusionNode
+from uav_fusion.nodes.radar_replay import RadarReplay
+from uav_fusion.nodes.rf_replay import RfReplay
+from uav_fusion.nodes.truth_replay import TruthReplay
+from uav_fusion.replay import ReplayDriver, ReplayNode, flight_span
+
+Overrides = dict[str, dict[str, Any]]
+
+
+@dataclass
+class GraphResult:
+    """What one run did."""
+
+    ok: bool
+    published: dict[str, int] = field(default_factory=dict)
+    steps: int = 0
+    report: str | None = None
+    wall_s: float = 0.0
+    message: str = ""
+
+
+def _params(values: dict[str, Any] | None) -> list[Parameter]:
+    return [Parameter(k, value=v) for k, v in (values or {}).items()]
+
+
+class Graph:
+    """The nodes, their shared replay timeline and an executor (see the module docstring).
+
+    ``overrides`` maps a node name to parameter values that take precedence over any
+    ``--params-file``; ``evaluator`` False leaves the evaluator out.
+    """
+
+    def __init__(
+        self,
+        context: Context | None = None,
+        overrides: Overrides | None = None,
+        *,
+        evaluator: bool = True,
+        threads: int = 1,
+    ) -> None:
+        self.context = context if context is not None else get_default_context()
+        ov = overrides or {}
+        self.nodes: list[Node] = []
+        self.replays: list[ReplayNode] = []
+
+        def make(cls: Callable[..., Node], name: str) -> Any:
+            node = cls(context=self.context, parameter_overrides=_params(ov.get(name)))
+            self.nodes.append(node)
+            return node
+
+        try:
+            self.truth: TruthReplay = make(TruthReplay, "truth_replay")
+            self.rf: RfReplay = make(RfReplay, "rf_replay")
+            self.radar: RadarReplay = make(RadarReplay, "radar_replay")
+            self.fusion: FusionNode = make(FusionNode, "fusion_node")
+            self.evaluator: Any = None
+            if evaluator:
+                from uav_fusion.nodes.evaluator_node import EvaluatorNode
+
+                self.evaluator = make(EvaluatorNode, "evaluator_node")
+        except BaseException:
+            self.destroy()
+            raise
+        self.replays = [self.truth, self.rf, self.radar]
+        tp = self.truth.p
+        self.rate = float(tp["rate"])
+        self.driver = ReplayDriver(
+            self.truth,
+            rate=self.rate,
+            publish_clock=True,
+            clock_period_s=float(tp["clock_period_s"]),
+            wait_for_subscribers_s=float(tp["wait_for_subscribers_s"]),
+            batch_size=int(tp["batch_size"]),
+            span=flight_span(self.truth.flight),
+            batch_span_s=min(
+                float(tp["batch_span_s"]), 0.5 * float(self.fusion.p["reorder_window_s"])
+            ),
+            drained=self.drained,
+        )
+        self._streams: dict[str, list[Any]] = {}
+        for rnode in self.replays:
+            for pub, items in rnode.streams():
+                self.driver.add(pub, items, float(rnode.p["delay_s"]))
+                self._streams.setdefault(rnode.get_name(), []).append(pub)
+        self.executor: Executor = (
+            SingleThreadedExecutor(context=self.context)
+            if threads <= 1
+            else MultiThreadedExecutor(num_threads=threads, context=self.context)
+        )
+        for node in self.nodes:
+            self.executor.add_node(node)
+
+    # --- progress -------------------------------------------------------------------------
+    def published(self, node: str) -> int:
+        return sum(self.driver.published_to(p) for p in self._streams.get(node, []))
+
+    def fusion_inputs_published(self) -> int:
+        return self.driver.published_to(self.radar.pub) + self.driver.published_to(self.rf.pub)
+
+    def fusion_caught_up(self) -> bool:
+        f = self.fusion
+        return f.received[RADAR] + f.received[RF] >= self.fusion_inputs_published()
+
+    def evaluator_expected(self) -> int:
+        f = self.fusion
+        n = self.published("truth_replay") + self.driver.published_to(self.rf.pub)
+        if self.radar.pub_raw is not None:
+            n += self.driver.published_to(self.radar.pub_raw)
+        return n + f.steps_published + f.accepted_published
+
+    def evaluator_caught_up(self) -> bool:
+        if self.evaluator is None:
+            return True
+        return int(sum(self.evaluator.received.values())) >= self.evaluator_expected()
+
+    def drained(self) -> bool:
+        """Have the consumers taken every message published so far?"""
+        return self.fusion_caught_up() and self.evaluator_caught_up()
+
+    # --- running --------------------------------------------------------------------------
+    def spin_until(self, cond: Callable[[], bool], timeout_s: float) -> bool:
+        end = time.monotonic() + timeout_s
+        while not cond():
+            if time.monotonic() > end or not self.context.ok():
+                return False
+            self.executor.spin_once(timeout_sec=0.02)
+        return True
+
+    def run(self, timeout_s: float = 3600.0, write_report: bool = True) -> GraphResult:
+        """Replay the flight once, flush, and (with an evaluator) write the report."""
+        t0 = time.monotonic()
+        self.driver.start()
+        end = t0 + timeout_s
+        res = GraphResult(ok=False)
+        if not self.spin_until(lambda: self.driver.done and self.fusion_caught_up(), timeout_s):
+            res.message = (
+                f"replay did not finish in {timeout_s:g} s ({self.driver.remaining} left)"
+            )
+            return res
+        self.fusion.flush()
+        if not self.spin_until(self.evaluator_caught_up, max(1.0, end - time.monotonic())):
+            res.message = "the evaluator did not receive every message"
+            return res
+        res.ok = True
+        res.steps = self.fusion.steps_published
+        res.published = {n.get_name(): self.published(n.get_name()) for n in self.replays}
+        if self.evaluator is not None and write_report:
+            files = self.evaluator.write_report()
+            res.report = str(files.folder)
+        res.wall_s = time.monotonic() - t0
+        return res
+
+    def destroy(self) -> None:
+        for node in reversed(self.nodes):
+            node.destroy_node()
+        self.nodes.clear()
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv if args is None else args)
+    parser = argparse.ArgumentParser(prog="graph", description=__doc__.split("\n")[0])
+    parser.add_argument("--threads", type=int, default=1, help="executor threads (default 1)")
+    parser.add_argument("--no-evaluator", action="store_true", help="leave the evaluator out")
+    parser.add_argument("--timeout", type=float, default=3600.0, help="give up after seconds")
+    opts = parser.parse_args(remove_ros_args(argv)[1:])
+    rclpy.init(args=argv)
+    graph: Graph | None = None
+    try:
+        graph = Graph(evaluator=not opts.no_evaluator, threads=opts.threads)
+        res = graph.run(timeout_s=opts.timeout)
+        log = graph.truth.get_logger()
+        if not res.ok:
+            log.error(res.message)
+            return 1
+        log.info(
+            f"done in {res.wall_s:.1f} s: published {res.published}, {res.steps} filter steps"
+            + (f"; report in {res.report}" if res.report else "")
+        )
+        return 0
+    except UavFusionError as exc:
+        print(f"graph: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        if graph is not None:
+            graph.destroy()
+        rclpy.utilities.try_shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
