@@ -109,6 +109,8 @@ def play(s: Sink, bag: Path, expect: int, timeout: float = 30.0, **params: Any) 
         ex.spin_once(timeout_sec=0.02)
     player.stop()
     ex.shutdown()
+    player.destroy_node()
+    s.node.destroy_node()
     assert player.error is None
     return player
 
