@@ -44,8 +44,14 @@ def _profile(q: tuple[float, float, float]):  # type: ignore[no-untyped-def]
 
 def _stream(seed: int, q: tuple[float, float, float]) -> list[Measurement]:
     s = simulate_stream(
-        seed, 120.0, q, R_RADAR, R_RF, outlier_rate={"radar": 0.03, "rf": 0.3},
-        outlier_scale_m=300.0, t0=0.0,
+        seed,
+        120.0,
+        q,
+        R_RADAR,
+        R_RF,
+        outlier_rate={"radar": 0.03, "rf": 0.3},
+        outlier_scale_m=300.0,
+        t0=0.0,
     )
     # the stream starts with a radar report (our init source); times on a 1 us grid, the
     # resolution of Stone Soup's datetime stamps
@@ -86,8 +92,9 @@ def _filterpy(ms: list[Measurement], q: tuple[float, float, float], builtin_q: b
         T = m.t - t
         t = m.t
         if builtin_q:  # filterpy's own CWNA builder, state ordered [x y z vx vy vz]
-            Q = Q_continuous_white_noise(2, dt=T, spectral_density=q[0], block_size=3,
-                                         order_by_dim=False)
+            Q = Q_continuous_white_noise(
+                2, dt=T, spectral_density=q[0], block_size=3, order_by_dim=False
+            )
         else:
             Q = cv_process_noise(T, q)
         kf.predict(F=cv_transition(T), Q=Q)
@@ -194,8 +201,9 @@ def test_reference_q_equals_filterpy_builder() -> None:
     from filterpy.common import Q_continuous_white_noise
 
     for T in (0.01, 0.25, 3.88, 17.0):
-        ref = Q_continuous_white_noise(2, dt=T, spectral_density=1.7, block_size=3,
-                                       order_by_dim=False)
+        ref = Q_continuous_white_noise(
+            2, dt=T, spectral_density=1.7, block_size=3, order_by_dim=False
+        )
         np.testing.assert_allclose(cv_process_noise(T, (1.7, 1.7, 1.7)), ref, rtol=1e-15)
 
 
