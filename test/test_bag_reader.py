@@ -282,47 +282,55 @@ def test_interop_bare_storage_files(tmp_path: Path) -> None:
 # --- converter -------------------------------------------------------------------------------
 
 
-def test_convert_flight_writes_every_record(tmp_path: Path) -> None:
+def test_convert_flight_writes_what_the_replay_nodes_publish(tmp_path: Path) -> None:
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from sensor_msgs.msg import NavSatFix
     from test_graph_flight import write_flight
 
-    from uav_fusion.bag.convert import convert_flight, estimate_radar_R
+    from uav_fusion.bag.convert import convert_flight
     from uav_fusion.conversions import time_from_stamp
     from uav_fusion.core.dataset import load_flight
+    from uav_fusion.core.estimator import load_profile
     from uav_fusion.core.site import load_site
+    from uav_fusion.nodes.radar_replay import selected_radar, uav_class_reports
 
     site = load_site()
     flight = load_flight(write_flight(tmp_path / "f", seconds=20.0), site)
     res = convert_flight(flight, site, tmp_path / "bag", namespace="uav")
+    prof = load_profile("paper")
+    selected = [m for group in selected_radar(flight, prof, site) for m in group]
+    raw = uav_class_reports(flight, prof)
+    assert 0 < len(selected) < len(raw)
     r = BagReader(tmp_path / "bag")
-    reports = [tr for fr in flight.radar for tr in fr.tracks]
-    uav = [tr for tr in reports if tr.uav_prob is not None and tr.uav_prob >= 0.5]
     assert {t: v.count for t, v in r.topics.items()} == {
-        "/uav/radar/raw": len(reports),
-        "/uav/radar/pose": len(uav),
+        "/uav/radar/pose": len(selected),
+        "/uav/radar/raw": len(raw),
         "/uav/rf/fix": len(flight.rf),
         "/uav/truth/fix": len(flight.truth),
     }
-    R, n = estimate_radar_R(flight, site, 0.5)
-    assert np.allclose(R, res.radar_cov) and n > 10
+    assert np.array_equal(res.radar_cov, prof.r_radar)
     poses = [
         deserialize_message(m.data, PoseWithCovarianceStamped)
         for m in r.messages(["/uav/radar/pose"])
     ]
-    for msg, tr in zip(poses, uav, strict=True):
+    for msg, m in zip(poses, selected, strict=True):
         assert msg.header.frame_id == site.frame_id
-        assert math.isclose(time_from_stamp(msg.header.stamp), tr.t, abs_tol=1e-9)
-        assert (msg.pose.pose.position.x, msg.pose.pose.position.y) == (tr.e, tr.n)
-        assert np.allclose(np.reshape(msg.pose.covariance, (6, 6))[:3, :3], R)
+        assert math.isclose(time_from_stamp(msg.header.stamp), m.t, abs_tol=1e-9)
+        p = msg.pose.pose.position
+        assert (p.x, p.y, p.z) == tuple(float(v) for v in m.z)
+        assert np.allclose(np.reshape(msg.pose.covariance, (6, 6))[:3, :3], prof.r_radar)
     fixes = [deserialize_message(m.data, NavSatFix) for m in r.messages(["/uav/truth/fix"])]
     assert [f.latitude for f in fixes] == [f.lat for f in flight.truth]
-    # the stored receive time is the sensor time
+    assert {f.header.frame_id for f in fixes} == {"gps"}
+    # stored receive times are the sensor times, in order across topics
+    stamps = [m.timestamp_ns for m in r.messages()]
+    assert stamps == sorted(stamps)
     first = next(iter(r.messages(["/uav/truth/fix"])))
     assert first.timestamp_ns == round(flight.truth[0].t * 1e9)
     meta = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())
-    assert "estimated from" in meta["rosbag2_bagfile_information"]["custom_data"][
-        "uav_fusion.radar_R_source"]
+    custom = meta["rosbag2_bagfile_information"]["custom_data"]
+    assert custom["uav_fusion.profile"] == "paper"
+    assert custom["uav_fusion.radar_selection"] == prof.radar_selection
 
 
 def test_convert_command_errors_are_clear(
