@@ -77,8 +77,10 @@ class Harness:
         self.ex.add_node(self.fusion)
         self.ex.add_node(self.io)
         self.spin_until(
-            lambda: self.pub_radar.get_subscription_count() > 0
-            and self.pub_rf.get_subscription_count() > 0
+            lambda: (
+                self.pub_radar.get_subscription_count() > 0
+                and self.pub_rf.get_subscription_count() > 0
+            )
         )
 
     def spin_until(self, cond: Callable[[], bool], limit_s: float = 60.0) -> None:
