@@ -1,0 +1,243 @@
+"""Parameters of the digital twin, loaded from ``config/twin_default.yaml``.
+
+Each section of the YAML file maps onto one dataclass below; a key the dataclass does not know,
+or a value of the wrong type, is a :class:`~uav_fusion.core.errors.ConfigError` naming the file
+and the key. Missing keys keep the defaults written here (which equal the shipped file).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.resources import config_path
+
+DEFAULT_TWIN_CONFIG = "twin_default.yaml"
+DEFAULT_WAYPOINTS = "waypoints/lake_wheeler_default.yaml"
+
+
+@dataclass(frozen=True)
+class FlightDynamics:
+    """Point-mass multirotor following waypoints (guidance + acceleration limits)."""
+
+    dt_s: float = 0.02  # integration step
+    accel_max_mps2: float = 2.5  # horizontal acceleration limit
+    vert_accel_max_mps2: float = 1.5
+    climb_rate_mps: float = 3.0  # vertical speed limit (up and down)
+    land_rate_mps: float = 1.2  # vertical speed of the last (landing) leg
+    response_s: float = 0.8  # time constant of the velocity loop
+    accept_radius_m: float = 6.0  # waypoint is reached inside this distance
+    corner_min_speed_mps: float = 2.0  # speed floor through a sharp corner
+    wind_gust_mps: float = 0.35  # std of the gust velocity (Ornstein-Uhlenbeck)
+    wind_gust_tau_s: float = 4.0  # correlation time of the gusts
+
+
+@dataclass(frozen=True)
+class TruthModel:
+    """RTK GNSS log of the vehicle (dronekit-style vehicleOut file)."""
+
+    rate_hz: float = 5.0
+    sigma_h_m: float = 0.012  # RTK noise, horizontal, per axis
+    sigma_v_m: float = 0.02  # RTK noise, vertical
+    fix_type: int = 6  # RTK fixed
+    num_sats_min: int = 14
+    num_sats_max: int = 21
+    no_fix_rows_start: int = 3  # -999 rows (fix type 1) before the first fix
+    no_fix_dropouts: int = 2  # isolated -999 rows during the flight
+    battery_full_v: float = 25.1
+    battery_drop_v_per_min: float = 0.18
+    battery_noise_v: float = 0.02
+
+
+@dataclass(frozen=True)
+class RadarModel:
+    """Ku-band radar (R20-like): detections, onboard CV tracker, clutter and birds."""
+
+    scan_interval_s: float = 0.25  # track report interval
+    scan_jitter_s: float = 0.004  # std of the report time jitter
+    sigma_range_m: float = 1.0  # range noise (1 m resolution)
+    sigma_az_deg: float = 1.1  # white azimuth noise per detection
+    sigma_el_deg: float = 1.0  # white elevation noise per detection
+    glint_sigma_deg: float = 1.1  # slowly varying (glint) angle error, az and el alike
+    glint_tau_s: float = 3.0  # its correlation time
+    az_bias_deg: float = 0.5  # residual mounting misalignment in azimuth
+    el_bias_deg: float = 0.3  # ... and in elevation
+    multipath_el_deg: float = 4.0  # below about this elevation ground multipath ...
+    multipath_gain: float = 1.0  # ... inflates the elevation noise by up to (1 + gain)
+    max_range_m: float = 3000.0  # no detection beyond
+    min_radial_speed_mps: float = 0.15  # Doppler clutter notch
+    min_agl_m: float = 4.0  # below this the target is lost in ground clutter
+    snr_ref_db: float = 31.0  # SNR of a 1 m^2 target at ref range
+    snr_ref_range_m: float = 1000.0
+    detect_threshold_db: float = 13.0  # SNR needed for a detection (Pfa ~1e-6)
+    detect_noise_db: float = 1.5  # per-look fluctuation of the SNR besides the RCS draw
+    rcs_median_m2: float = 0.07  # lognormal RCS per look
+    rcs_sigma_ln: float = 0.85
+    rcs_min_m2: float = 0.0066
+    rcs_max_m2: float = 0.549
+    tracker_q_mps2: float = 0.05  # white-acceleration PSD of the onboard CV filter (m^2/s^3)
+    tracker_gate_sigma: float = 4.0  # association gate in innovation sigmas
+    tracker_gate_min_m: float = 12.0  # plus this floor
+    confirm_hits: int = 3  # M-of-N confirmation of a new track
+    confirm_window: int = 5
+    max_coast_s: float = 4.0  # delete after this long without update, near the radar
+    max_coast_far_s: float = 6.0  # ... and this long at max_coast_ref_range_m or more
+    max_coast_ref_range_m: float = 1200.0
+    uav_prob_start: float = 0.55  # catProb[0] of a new UAV track ...
+    uav_prob_final: float = 0.93  # ... rising to this with track age
+    uav_prob_tau_s: float = 6.0
+    bird_rate_per_min: float = 1.6  # birth rate of bird tracks
+    bird_life_s: float = 25.0  # mean life of a bird track
+    bird_speed_mps: float = 7.0
+    clutter_rate_per_min: float = 1.0  # birth rate of short clutter tracks
+    clutter_life_s: float = 6.0
+    status_every_s: float = 30.0  # a status line this often
+    params_track_every: int = 7  # every n-th frame carries trackData inside params
+
+
+@dataclass(frozen=True)
+class RfModel:
+    """Passive TDOA sensor network (N6841A-like) and its multilateration."""
+
+    interval_s: float = 3.88  # mean time between localisation attempts
+    interval_jitter_s: float = 0.25  # uniform +- jitter on that interval
+    center_frequency_hz: float = 3.32e9
+    sample_rate_hz: float = 6.25e6
+    num_samples: int = 32768
+    sigma_timing_ns: float = 25.0  # GPS-disciplined timestamp noise per sensor
+    los_multipath_m: float = 3.0  # mean excess path on a line-of-sight link (exponential)
+    nlos_el50_deg: float = 0.9  # elevation at which a link is NLOS with probability 1/2
+    nlos_el_width_deg: float = 0.3  # softness of that transition
+    nlos_far_km: float = 1.4  # beyond this distance the NLOS probability rises further
+    nlos_far_gain_per_km: float = 0.7
+    nlos_excess_m: float = 120.0  # mean NLOS excess path (exponential) ...
+    nlos_excess_per_km_m: float = 260.0  # ... plus this per km of link length
+    detect_snr_ref_db: float = 30.0  # SNR at 1 km (free space, LOS)
+    nlos_loss_db: float = 12.0
+    detect_snr_min_db: float = 8.0  # a sensor below this SNR is not valid
+    sensor_dropout: float = 0.09  # independent per-sensor dropout per attempt
+    overload_range_m: float = 60.0  # a sensor this close is overloaded (and invalid)
+    assumed_height_m: float = 40.0  # height above the origin used by the 2D solver
+    max_iterations: int = 100  # function evaluations of the least-squares refinement
+    converge_m: float = 0.05
+    max_residual_m: float = 1500.0  # RMS TDOA residual (m) above which a fix is rejected
+    search_margin_m: float = 3000.0  # the solver searches the sensors' box widened by this
+    max_solution_range_m: float = 6000.0  # a solution farther from the sensors is a failure
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Where the recording sits in time and what the files are called."""
+
+    start_utc: str = "2025-10-07 19:40:00"
+    tail_s: float = 10.0  # recording continues this long after landing
+
+
+@dataclass(frozen=True)
+class TwinConfig:
+    dynamics: FlightDynamics = field(default_factory=FlightDynamics)
+    truth: TruthModel = field(default_factory=TruthModel)
+    radar: RadarModel = field(default_factory=RadarModel)
+    rf: RfModel = field(default_factory=RfModel)
+    recording: Recording = field(default_factory=Recording)
+    seed: int = 28
+    source: Path | None = None
+
+
+T = TypeVar("T")
+
+
+def _section(cls: type[T], raw: Any, where: str) -> T:
+    if raw is None:
+        return cls()
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: expected a mapping")
+    known = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    kwargs: dict[str, Any] = {}
+    for key, value in raw.items():
+        if key not in known:
+            raise ConfigError(f"{where}: unknown key '{key}' (known: {', '.join(sorted(known))})")
+        default = getattr(cls(), key)
+        if isinstance(default, bool) or not isinstance(default, (int, float, str)):
+            raise ConfigError(f"{where}: key '{key}' cannot be set here")
+        if isinstance(default, str):
+            kwargs[key] = str(value)
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where}: '{key}' must be a number, got {value!r}")
+        if isinstance(default, int) and not isinstance(default, bool):
+            if float(value) != int(value):
+                raise ConfigError(f"{where}: '{key}' must be an integer, got {value!r}")
+            kwargs[key] = int(value)
+        else:
+            kwargs[key] = float(value)
+        if kwargs[key] != kwargs[key] or kwargs[key] in (float("inf"), float("-inf")):
+            raise ConfigError(f"{where}: '{key}' must be finite")
+    return cls(**kwargs)
+
+
+def twin_config_from_dict(doc: Any, source: Path | None = None) -> TwinConfig:
+    """Build a :class:`TwinConfig` from a parsed YAML document."""
+    src = str(source) if source else "<twin config>"
+    if doc is None:
+        doc = {}
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{src}: expected a mapping at top level")
+    sections = {"dynamics", "truth", "radar", "rf", "recording", "seed"}
+    for key in doc:
+        if key not in sections:
+            raise ConfigError(f"{src}: unknown section '{key}' (known: {', '.join(sorted(sections))})")
+    seed = doc.get("seed", 28)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"{src}: 'seed' must be a non-negative integer, got {seed!r}")
+    cfg = TwinConfig(
+        dynamics=_section(FlightDynamics, doc.get("dynamics"), f"{src}: dynamics"),
+        truth=_section(TruthModel, doc.get("truth"), f"{src}: truth"),
+        radar=_section(RadarModel, doc.get("radar"), f"{src}: radar"),
+        rf=_section(RfModel, doc.get("rf"), f"{src}: rf"),
+        recording=_section(Recording, doc.get("recording"), f"{src}: recording"),
+        seed=seed,
+        source=source,
+    )
+    _validate(cfg, src)
+    return cfg
+
+
+def _validate(cfg: TwinConfig, src: str) -> None:
+    positive = {
+        "dynamics.dt_s": cfg.dynamics.dt_s,
+        "dynamics.accel_max_mps2": cfg.dynamics.accel_max_mps2,
+        "dynamics.climb_rate_mps": cfg.dynamics.climb_rate_mps,
+        "dynamics.response_s": cfg.dynamics.response_s,
+        "truth.rate_hz": cfg.truth.rate_hz,
+        "radar.scan_interval_s": cfg.radar.scan_interval_s,
+        "radar.sigma_az_deg": cfg.radar.sigma_az_deg,
+        "radar.max_range_m": cfg.radar.max_range_m,
+        "radar.rcs_median_m2": cfg.radar.rcs_median_m2,
+        "rf.interval_s": cfg.rf.interval_s,
+        "rf.sigma_timing_ns": cfg.rf.sigma_timing_ns,
+    }
+    for key, value in positive.items():
+        if value <= 0:
+            raise ConfigError(f"{src}: {key} must be > 0, got {value}")
+    if cfg.rf.interval_jitter_s >= cfg.rf.interval_s:
+        raise ConfigError(f"{src}: rf.interval_jitter_s must be smaller than rf.interval_s")
+    if cfg.radar.confirm_hits > cfg.radar.confirm_window:
+        raise ConfigError(f"{src}: radar.confirm_hits must not exceed radar.confirm_window")
+
+
+def load_twin_config(path: str | Path | None = None) -> TwinConfig:
+    """Load twin parameters (default: the shipped ``config/twin_default.yaml``)."""
+    p = Path(path) if path is not None else config_path(DEFAULT_TWIN_CONFIG)
+    if not p.is_file():
+        raise ConfigError(f"{p}: twin configuration file not found")
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
+    return twin_config_from_dict(doc, p)

@@ -1,0 +1,283 @@
+"""Waypoint flight plans and the multirotor flight they produce.
+
+A flight plan (YAML, see ``config/waypoints/``) lists waypoints in ENU metres about the site
+origin (``e``, ``n``) or in geodetic degrees (``lat``, ``lon``), each with an altitude ``alt``
+above the take-off point and an optional leg speed. The vehicle starts on the ground at the
+site's take-off point, waits ``hold_before_s``, then flies the waypoints in order with a
+point-mass model: a velocity command towards the active waypoint (capped by the leg speed,
+slowed so that it can take the next corner, and braked before the last one), tracked by a
+first-order velocity loop with acceleration limits, plus correlated wind gusts. A waypoint
+with ``alt`` 0 as the last one is a landing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.site import Site
+from uav_fusion.core.twin.config import FlightDynamics
+
+FloatArray = npt.NDArray[np.float64]
+G = 9.80665
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    e: float
+    n: float
+    alt: float  # metres above the take-off point
+    speed: float  # leg speed towards this waypoint, m/s
+
+
+@dataclass(frozen=True)
+class FlightPlan:
+    name: str
+    waypoints: tuple[Waypoint, ...]
+    hold_before_s: float
+    source: Path | None = None
+
+
+def _num(d: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
+    if key not in d:
+        if default is None:
+            raise ConfigError(f"{where}: missing key '{key}'")
+        return default
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+        raise ConfigError(f"{where}: '{key}' must be a finite number, got {v!r}")
+    return float(v)
+
+
+def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> FlightPlan:
+    """Validate a parsed flight-plan document and convert its waypoints to ENU."""
+    src = str(source) if source else "<flight plan>"
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{src}: expected a mapping at top level")
+    speed = _num(doc, "speed_mps", src, 10.0)
+    if not 0.5 <= speed <= 30.0:
+        raise ConfigError(f"{src}: speed_mps must lie in [0.5, 30], got {speed}")
+    hold = _num(doc, "hold_before_s", src, 0.0)
+    if hold < 0:
+        raise ConfigError(f"{src}: hold_before_s must be >= 0")
+    raw = doc.get("waypoints")
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"{src}: 'waypoints' must be a non-empty list")
+    wps: list[Waypoint] = []
+    for i, w in enumerate(raw, start=1):
+        where = f"{src}: waypoint {i}"
+        if not isinstance(w, dict):
+            raise ConfigError(f"{where}: expected a mapping")
+        unknown = set(w) - {"e", "n", "lat", "lon", "alt", "speed", "note"}
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+        has_enu = "e" in w or "n" in w
+        has_geo = "lat" in w or "lon" in w
+        if has_enu == has_geo:
+            raise ConfigError(f"{where}: give either e/n (ENU metres) or lat/lon (degrees)")
+        if has_enu:
+            e, n = _num(w, "e", where), _num(w, "n", where)
+        else:
+            lat, lon = _num(w, "lat", where), _num(w, "lon", where)
+            if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+                raise ConfigError(f"{where}: lat/lon out of range")
+            ee, nn, _ = site.to_enu(lat, lon, site.takeoff_h)
+            e, n = float(ee), float(nn)
+        if math.hypot(e, n) > 20000.0:
+            raise ConfigError(f"{where}: more than 20 km from the site origin")
+        alt = _num(w, "alt", where)
+        if not 0.0 <= alt <= 500.0:
+            raise ConfigError(f"{where}: alt must lie in [0, 500] m, got {alt}")
+        sp = _num(w, "speed", where, speed)
+        if not 0.5 <= sp <= 30.0:
+            raise ConfigError(f"{where}: speed must lie in [0.5, 30], got {sp}")
+        wps.append(Waypoint(e, n, alt, sp))
+    name = str(doc.get("name", source.stem if source else "flight"))
+    return FlightPlan(name, tuple(wps), hold, source)
+
+
+def load_flight_plan(path: str | Path, site: Site) -> FlightPlan:
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{p}: waypoint file not found")
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
+    return flight_plan_from_dict(doc, site, p)
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Densely sampled flight (times in seconds since the start of the recording)."""
+
+    t: FloatArray  # [N]
+    pos: FloatArray  # [N, 3] ENU
+    vel: FloatArray  # [N, 3] ENU velocity
+    acc: FloatArray  # [N, 3] ENU acceleration
+    ground_u: float  # ENU up of the take-off point
+    t_takeoff: float
+    t_landed: float
+
+    def _interp(self, arr: FloatArray, tq: FloatArray | float) -> FloatArray:
+        q = np.atleast_1d(np.asarray(tq, dtype=float))
+        return np.stack([np.interp(q, self.t, arr[:, k]) for k in range(3)], axis=1)
+
+    def position(self, tq: FloatArray | float) -> FloatArray:
+        return self._interp(self.pos, tq)
+
+    def velocity(self, tq: FloatArray | float) -> FloatArray:
+        return self._interp(self.vel, tq)
+
+    def acceleration(self, tq: FloatArray | float) -> FloatArray:
+        return self._interp(self.acc, tq)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1])
+
+    def attitude(self, tq: FloatArray | float) -> FloatArray:
+        """(pitch, yaw, roll) in radians: yaw = heading, tilt from the acceleration."""
+        v = self.velocity(tq)
+        a = self.acceleration(tq)
+        yaw = np.arctan2(v[:, 0], v[:, 1])
+        fwd = np.stack([np.sin(yaw), np.cos(yaw)], axis=1)
+        right = np.stack([np.cos(yaw), -np.sin(yaw)], axis=1)
+        a_f = np.sum(a[:, :2] * fwd, axis=1)
+        a_r = np.sum(a[:, :2] * right, axis=1)
+        pitch = -np.arctan2(a_f, G)
+        roll = np.arctan2(a_r, G)
+        return np.stack([pitch, yaw, roll], axis=1)
+
+
+def fly(
+    plan: FlightPlan,
+    site: Site,
+    dyn: FlightDynamics,
+    rng: np.random.Generator,
+    tail_s: float = 10.0,
+    duration_s: float | None = None,
+) -> Trajectory:
+    """Integrate the flight of ``plan``; the recording ends ``tail_s`` after landing.
+
+    With ``duration_s`` the recording has exactly that length: a longer one keeps the vehicle
+    on the ground after landing (or hovering at its last waypoint), a shorter one cuts the
+    flight off.
+    """
+    te, tn, tu = site.to_enu(site.takeoff_lat, site.takeoff_lon, site.takeoff_h)
+    ground = float(tu)
+    p = [float(te), float(tn), ground]
+    v = [0.0, 0.0, 0.0]
+    gust = [0.0, 0.0]
+    dt = dyn.dt_s
+    targets = [(w.e, w.n, ground + w.alt, w.speed) for w in plan.waypoints]
+    landing = plan.waypoints[-1].alt <= 0.5
+    g_a = math.exp(-dt / dyn.wind_gust_tau_s)
+    g_b = dyn.wind_gust_mps * math.sqrt(1.0 - g_a * g_a)
+    max_t = duration_s if duration_s is not None else 6 * 3600.0
+
+    ts: list[float] = []
+    ps: list[tuple[float, float, float]] = []
+    vs: list[tuple[float, float, float]] = []
+    k = 0
+    wi = 0
+    t = 0.0
+    t_takeoff = math.nan
+    t_landed = math.nan
+    t_end = math.inf
+    while True:
+        t = k * dt
+        if t > max_t + 1e-9 or t > t_end + 1e-9:
+            break
+        airborne = p[2] > ground + 0.05
+        if wi < len(targets) and t >= plan.hold_before_s:
+            if math.isnan(t_takeoff):
+                t_takeoff = t
+            tx, ty, tz, sp = targets[wi]
+            dx, dy, dz = tx - p[0], ty - p[1], tz - p[2]
+            dh = math.hypot(dx, dy)
+            last = wi == len(targets) - 1
+            if last:
+                v_corner = 0.0
+            else:
+                nx, ny = targets[wi + 1][0] - tx, targets[wi + 1][1] - ty
+                nh = math.hypot(nx, ny)
+                if nh < 1e-6 or dh < 1e-6:
+                    v_corner = dyn.corner_min_speed_mps
+                else:
+                    cosang = (dx * nx + dy * ny) / (dh * nh)
+                    half = 0.5 * math.acos(max(-1.0, min(1.0, cosang)))
+                    v_corner = max(dyn.corner_min_speed_mps, sp * math.cos(half) ** 2)
+                v_corner = min(v_corner, targets[wi + 1][3], sp)
+            brake = 0.6 * dyn.accel_max_mps2
+            v_h = min(sp, math.sqrt(v_corner**2 + 2.0 * brake * max(dh - dyn.accept_radius_m, 0.0)))
+            if last:
+                v_h = min(v_h, 0.8 * dh)
+            if last and landing:
+                # descend at the landing rate once over the spot (within 2 accept radii)
+                v_z = -dyn.land_rate_mps if dh < 2.0 * dyn.accept_radius_m else 0.0
+            else:
+                t_h = dh / max(v_h, 0.5)
+                v_z = math.copysign(min(dyn.climb_rate_mps, abs(dz) / max(t_h, 1.0)), dz)
+            ux, uy = (dx / dh, dy / dh) if dh > 1e-9 else (0.0, 0.0)
+            cmd = (v_h * ux, v_h * uy, v_z)
+            ax = (cmd[0] - v[0]) / dyn.response_s
+            ay = (cmd[1] - v[1]) / dyn.response_s
+            az = (cmd[2] - v[2]) / dyn.response_s
+            ah = math.hypot(ax, ay)
+            if ah > dyn.accel_max_mps2:
+                ax, ay = ax * dyn.accel_max_mps2 / ah, ay * dyn.accel_max_mps2 / ah
+            az = max(-dyn.vert_accel_max_mps2, min(dyn.vert_accel_max_mps2, az))
+            v = [v[0] + ax * dt, v[1] + ay * dt, v[2] + az * dt]
+            reached = math.sqrt(dh * dh + dz * dz) < (
+                0.25 if (last and landing) else dyn.accept_radius_m
+            )
+            if last and landing and p[2] <= ground + 0.02 and dh < dyn.accept_radius_m:
+                reached = True
+            if reached:
+                wi += 1
+                if wi == len(targets):
+                    t_landed = t
+                    if duration_s is None:
+                        t_end = t + tail_s
+        elif wi >= len(targets):
+            if landing or not airborne:
+                v = [0.0, 0.0, 0.0]
+            else:  # hover at the last waypoint
+                v = [0.9 * v[0], 0.9 * v[1], 0.9 * v[2]]
+        if airborne:
+            gust = [
+                g_a * gust[0] + g_b * float(rng.standard_normal()),
+                g_a * gust[1] + g_b * float(rng.standard_normal()),
+            ]
+        else:
+            gust = [0.0, 0.0]
+        vt = (v[0] + gust[0], v[1] + gust[1], v[2])
+        ts.append(t)
+        ps.append((p[0], p[1], p[2]))
+        vs.append(vt)
+        p = [p[0] + vt[0] * dt, p[1] + vt[1] * dt, max(ground, p[2] + vt[2] * dt)]
+        if p[2] <= ground and v[2] < 0:
+            v[2] = 0.0
+        k += 1
+        if duration_s is None and k * dt > 6 * 3600.0:
+            raise ConfigError(
+                f"{plan.source or plan.name}: flight did not finish within 6 h "
+                f"(stuck before waypoint {wi + 1})"
+            )
+    tt = np.asarray(ts, dtype=float)
+    pos = np.asarray(ps, dtype=float)
+    vel = np.asarray(vs, dtype=float)
+    acc = np.gradient(vel, tt, axis=0) if tt.size > 1 else np.zeros_like(vel)
+    if math.isnan(t_landed):
+        t_landed = float(tt[-1])
+    if math.isnan(t_takeoff):
+        t_takeoff = float(tt[-1])
+    return Trajectory(tt, pos, vel, acc, ground, t_takeoff, t_landed)
