@@ -161,6 +161,7 @@ class BagPlayer(Node):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: str | None = None
+        self.ack_wait_s = 0.0
 
     @staticmethod
     def _qos(topic: BagTopic, reliability: str, depth: int) -> QoSProfile:
@@ -249,10 +250,17 @@ class BagPlayer(Node):
             self.passes += 1
             if not self.loop or (self.loop_count and self.passes >= self.loop_count):
                 break
-        for pub in self._pubs.values():
-            if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
-                pub.wait_for_all_acked(rclpy.duration.Duration(seconds=5.0))
         wall = time.monotonic() - t_begin
+        t_ack = time.monotonic()
+        unacked = [
+            self._out[n] for n, pub in self._pubs.items()
+            if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+            and not pub.wait_for_all_acked(rclpy.duration.Duration(seconds=5.0))
+        ]
+        if unacked:
+            self.get_logger().warning(
+                f"not acknowledged by every subscriber within 5 s: {', '.join(unacked)}")
+        self.ack_wait_s = time.monotonic() - t_ack
         per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.played.items()))
         skipped = "; skipped " + ", ".join(
             f"{t} ({self.reader.topics[t].count}: {why})" for t, why in self.skipped.items()
