@@ -162,6 +162,7 @@ class BagPlayer(Node):
         self._thread: threading.Thread | None = None
         self.error: str | None = None
         self.ack_wait_s = 0.0
+        self._last_clock: int | None = None
 
     @staticmethod
     def _qos(topic: BagTopic, reliability: str, depth: int) -> QoSProfile:
@@ -213,7 +214,8 @@ class BagPlayer(Node):
             time.sleep(0.02)
 
     def _publish_clock(self, stamp_ns: int) -> None:
-        if self._clock_pub is not None:
+        if self._clock_pub is not None and stamp_ns != self._last_clock:
+            self._last_clock = stamp_ns
             msg = Clock()
             msg.clock.sec, msg.clock.nanosec = divmod(int(stamp_ns), 1_000_000_000)
             self._clock_pub.publish(msg)
