@@ -11,19 +11,39 @@ most of its time in call overhead. This module exploits the structure instead:
 * the Joseph form ``(I-KH) P (I-KH)^T + K R K^T`` with ``K = P H^T S^-1`` is evaluated as
   ``P - (HP)^T J (HP)`` with ``J = 2 S^-1 - S^-1 S S^-1``, which is the same expression
   multiplied out (exact for whatever ``S^-1`` was computed, so it keeps the Joseph form's
-  tolerance of gain errors); only the upper triangle is computed and mirrored, so ``P`` stays
-  exactly symmetric.
+  tolerance of gain errors); only the upper triangle is stored, so ``P`` is exactly
+  symmetric by construction.
 
-State is held in Python lists (``x``: 6 floats, ``P``: 36 floats, row-major, symmetric).
+State is held in Python lists: ``x`` 6 floats, ``P`` the 21 floats of the upper triangle,
+row by row (``UPPER_INDEX[i][j]`` gives the position of element (i, j)); :func:`expand_upper`
+turns it into the full symmetric 6x6 array.
 :mod:`uav_fusion.core.estimator.models` has the plain matrix version the tests compare with.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+
+_INF = float("inf")
+
+# position of element (i, j) of the symmetric 6x6 P in the 21-float upper-triangle list
+UPPER_INDEX: tuple[tuple[int, ...], ...] = tuple(
+    tuple((6 * min(i, j) - min(i, j) * (min(i, j) - 1) // 2) + abs(j - i) for j in range(6))
+    for i in range(6)
+)
+_FULL = np.array(UPPER_INDEX, dtype=np.intp).reshape(36)
+_UPPER_PAIRS = tuple((i, j) for i in range(6) for j in range(i, 6))
+
+
+def expand_upper(p: Sequence[float]) -> FloatArray:
+    """Full symmetric 6x6 array from the 21-float upper triangle."""
+    return np.asarray(p, dtype=float)[_FULL].reshape(6, 6)
+
 
 # R packed as the upper triangle: 3D (r00, r01, r02, r11, r12, r22), 2D (r00, r01, r11)
 PackedR = tuple[float, ...]
@@ -52,21 +72,22 @@ class CvKalman:
     def __init__(self, q: tuple[float, float, float]) -> None:
         self.q = (float(q[0]), float(q[1]), float(q[2]))
         self.x: list[float] = [0.0] * 6
-        self.P: list[float] = [0.0] * 36
+        self.P: list[float] = [0.0] * 21
 
     # --- state access -------------------------------------------------------------------
-    def set_state(self, x: FloatArray | list[float], P: FloatArray | list[list[float]]) -> None:
+    def set_state(self, x: FloatArray | Sequence[float], P: FloatArray) -> None:
+        """Set the state; ``P`` (6x6) is symmetrised and its upper triangle kept."""
         xa = np.asarray(x, dtype=float).reshape(6)
         Pa = np.asarray(P, dtype=float).reshape(6, 6)
         Pa = 0.5 * (Pa + Pa.T)
         self.x = [float(v) for v in xa]
-        self.P = [float(v) for v in Pa.reshape(36)]
+        self.P = [float(Pa[i, j]) for i, j in _UPPER_PAIRS]
 
     def x_array(self) -> FloatArray:
         return np.array(self.x)
 
     def P_array(self) -> FloatArray:
-        return np.array(self.P).reshape(6, 6)
+        return expand_upper(self.P)
 
     # --- prediction ---------------------------------------------------------------------
     def predict(self, T: float) -> None:
@@ -82,51 +103,34 @@ class CvKalman:
         q3 = T2 * T / 3.0
         q2 = 0.5 * T2
         p = self.P
-        # old values needed (upper triangle); B = pos-vel block, C = vel-vel block
+        # B = pos-vel block (b_ij = P[i, 3 + j]), C = vel-vel block; old values
         b00, b01, b02 = p[3], p[4], p[5]
-        b10, b11, b12 = p[9], p[10], p[11]
-        b20, b21, b22 = p[15], p[16], p[17]
-        c00, c01, c02 = p[21], p[22], p[23]
-        c11, c12 = p[28], p[29]
-        c22 = p[35]
+        b10, b11, b12 = p[8], p[9], p[10]
+        b20, b21, b22 = p[12], p[13], p[14]
+        c00, c01, c02, c11, c12, c22 = p[15], p[16], p[17], p[18], p[19], p[20]
         # A' = A + T (B + B^T) + T^2 C + Q_pp
-        a00 = p[0] + T * (b00 + b00) + T2 * c00 + qx * q3
-        a01 = p[1] + T * (b01 + b10) + T2 * c01
-        a02 = p[2] + T * (b02 + b20) + T2 * c02
-        a11 = p[7] + T * (b11 + b11) + T2 * c11 + qy * q3
-        a12 = p[8] + T * (b12 + b21) + T2 * c12
-        a22 = p[14] + T * (b22 + b22) + T2 * c22 + qz * q3
-        p[0] = a00
-        p[1] = p[6] = a01
-        p[2] = p[12] = a02
-        p[7] = a11
-        p[8] = p[13] = a12
-        p[14] = a22
+        p[0] += T * (b00 + b00) + T2 * c00 + qx * q3
+        p[1] += T * (b01 + b10) + T2 * c01
+        p[2] += T * (b02 + b20) + T2 * c02
+        p[6] += T * (b11 + b11) + T2 * c11 + qy * q3
+        p[7] += T * (b12 + b21) + T2 * c12
+        p[11] += T * (b22 + b22) + T2 * c22 + qz * q3
         # B' = B + T C + Q_pv
-        v = b00 + T * c00 + qx * q2
-        p[3] = p[18] = v
-        v = b01 + T * c01
-        p[4] = p[24] = v
-        v = b02 + T * c02
-        p[5] = p[30] = v
-        v = b10 + T * c01
-        p[9] = p[19] = v
-        v = b11 + T * c11 + qy * q2
-        p[10] = p[25] = v
-        v = b12 + T * c12
-        p[11] = p[31] = v
-        v = b20 + T * c02
-        p[15] = p[20] = v
-        v = b21 + T * c12
-        p[16] = p[26] = v
-        v = b22 + T * c22 + qz * q2
-        p[17] = p[32] = v
+        p[3] = b00 + T * c00 + qx * q2
+        p[4] = b01 + T * c01
+        p[5] = b02 + T * c02
+        p[8] = b10 + T * c01
+        p[9] = b11 + T * c11 + qy * q2
+        p[10] = b12 + T * c12
+        p[12] = b20 + T * c02
+        p[13] = b21 + T * c12
+        p[14] = b22 + T * c22 + qz * q2
         # C' = C + Q_vv
-        p[21] = c00 + qx * T
-        p[28] = c11 + qy * T
-        p[35] = c22 + qz * T
+        p[15] = c00 + qx * T
+        p[18] = c11 + qy * T
+        p[20] = c22 + qz * T
 
-    # --- 3D position measurement (radar) -----------------------------------------------------
+    # --- 3D position measurement (radar) ------------------------------------------------
     def nis3(self, z0: float, z1: float, z2: float, r: PackedR) -> float:
         """Normalised innovation squared of a 3D position against the current prediction."""
         p = self.P
@@ -134,9 +138,9 @@ class CvKalman:
         s00 = p[0] + r[0]
         s01 = p[1] + r[1]
         s02 = p[2] + r[2]
-        s11 = p[7] + r[3]
-        s12 = p[8] + r[4]
-        s22 = p[14] + r[5]
+        s11 = p[6] + r[3]
+        s12 = p[7] + r[4]
+        s22 = p[11] + r[5]
         i00 = s11 * s22 - s12 * s12
         i01 = s02 * s12 - s01 * s22
         i02 = s01 * s12 - s02 * s11
@@ -153,22 +157,20 @@ class CvKalman:
             + y2 * (i02 * y0 + i12 * y1 + i22 * y2)
         ) / det
 
-    def update3(
-        self, z0: float, z1: float, z2: float, r: PackedR, gate: float = float("inf")
-    ) -> float:
+    def update3(self, z0: float, z1: float, z2: float, r: PackedR, gate: float = _INF) -> float:
         """Joseph-form update with a 3D position; returns the NIS of the innovation.
 
-        With ``gate`` given, a measurement whose NIS exceeds it leaves the state untouched
-        (the caller sees the NIS and knows it was rejected).
+        With ``gate`` given, a measurement whose NIS exceeds it (or is NaN) leaves the
+        state untouched; the caller compares the returned NIS with the gate.
         """
         p = self.P
         x = self.x
         s00 = p[0] + r[0]
         s01 = p[1] + r[1]
         s02 = p[2] + r[2]
-        s11 = p[7] + r[3]
-        s12 = p[8] + r[4]
-        s22 = p[14] + r[5]
+        s11 = p[6] + r[3]
+        s12 = p[7] + r[4]
+        s22 = p[11] + r[5]
         i00 = s11 * s22 - s12 * s12
         i01 = s02 * s12 - s01 * s22
         i02 = s01 * s12 - s02 * s11
@@ -186,12 +188,12 @@ class CvKalman:
         u1 = i01 * y0 + i11 * y1 + i12 * y2
         u2 = i02 * y0 + i12 * y1 + i22 * y2
         nis = y0 * u0 + y1 * u1 + y2 * u2
-        if not nis <= gate:  # also rejects NaN
+        if not nis <= gate:  # also NaN
             return nis
         # rows of HP (the first rows of P)
-        h00, h01, h02, h03, h04, h05 = p[0:6]
-        h10, h11, h12, h13, h14, h15 = p[6:12]
-        h20, h21, h22, h23, h24, h25 = p[12:18]
+        h00, h01, h02, h03, h04, h05 = p[0], p[1], p[2], p[3], p[4], p[5]
+        h10, h11, h12, h13, h14, h15 = p[1], p[6], p[7], p[8], p[9], p[10]
+        h20, h21, h22, h23, h24, h25 = p[2], p[7], p[11], p[12], p[13], p[14]
         # x += (HP)^T S^-1 y
         x[0] += h00 * u0 + h10 * u1 + h20 * u2
         x[1] += h01 * u0 + h11 * u1 + h21 * u2
@@ -199,7 +201,7 @@ class CvKalman:
         x[3] += h03 * u0 + h13 * u1 + h23 * u2
         x[4] += h04 * u0 + h14 * u1 + h24 * u2
         x[5] += h05 * u0 + h15 * u1 + h25 * u2
-        # M = S^-1 S, J = 2 S^-1 - M S^-1 (the Joseph form's middle factor)
+        # M = S^-1 S, J = 2 S^-1 - M S^-1: the Joseph form's middle factor
         m00 = i00 * s00 + i01 * s01 + i02 * s02
         m01 = i00 * s01 + i01 * s11 + i02 * s12
         m02 = i00 * s02 + i01 * s12 + i02 * s22
@@ -234,53 +236,53 @@ class CvKalman:
         v23 = j02 * h03 + j12 * h13 + j22 * h23
         v24 = j02 * h04 + j12 * h14 + j22 * h24
         v25 = j02 * h05 + j12 * h15 + j22 * h25
-        # P -= (HP)^T V: upper triangle, mirrored
-        p[0] = p[0] - (h00 * v00 + h10 * v10 + h20 * v20)
-        p[1] = p[6] = p[1] - (h00 * v01 + h10 * v11 + h20 * v21)
-        p[2] = p[12] = p[2] - (h00 * v02 + h10 * v12 + h20 * v22)
-        p[3] = p[18] = p[3] - (h00 * v03 + h10 * v13 + h20 * v23)
-        p[4] = p[24] = p[4] - (h00 * v04 + h10 * v14 + h20 * v24)
-        p[5] = p[30] = p[5] - (h00 * v05 + h10 * v15 + h20 * v25)
-        p[7] = p[7] - (h01 * v01 + h11 * v11 + h21 * v21)
-        p[8] = p[13] = p[8] - (h01 * v02 + h11 * v12 + h21 * v22)
-        p[9] = p[19] = p[9] - (h01 * v03 + h11 * v13 + h21 * v23)
-        p[10] = p[25] = p[10] - (h01 * v04 + h11 * v14 + h21 * v24)
-        p[11] = p[31] = p[11] - (h01 * v05 + h11 * v15 + h21 * v25)
-        p[14] = p[14] - (h02 * v02 + h12 * v12 + h22 * v22)
-        p[15] = p[20] = p[15] - (h02 * v03 + h12 * v13 + h22 * v23)
-        p[16] = p[26] = p[16] - (h02 * v04 + h12 * v14 + h22 * v24)
-        p[17] = p[32] = p[17] - (h02 * v05 + h12 * v15 + h22 * v25)
-        p[21] = p[21] - (h03 * v03 + h13 * v13 + h23 * v23)
-        p[22] = p[27] = p[22] - (h03 * v04 + h13 * v14 + h23 * v24)
-        p[23] = p[33] = p[23] - (h03 * v05 + h13 * v15 + h23 * v25)
-        p[28] = p[28] - (h04 * v04 + h14 * v14 + h24 * v24)
-        p[29] = p[34] = p[29] - (h04 * v05 + h14 * v15 + h24 * v25)
-        p[35] = p[35] - (h05 * v05 + h15 * v15 + h25 * v25)
+        # P -= (HP)^T V (upper triangle)
+        p[0] -= h00 * v00 + h10 * v10 + h20 * v20
+        p[1] -= h00 * v01 + h10 * v11 + h20 * v21
+        p[2] -= h00 * v02 + h10 * v12 + h20 * v22
+        p[3] -= h00 * v03 + h10 * v13 + h20 * v23
+        p[4] -= h00 * v04 + h10 * v14 + h20 * v24
+        p[5] -= h00 * v05 + h10 * v15 + h20 * v25
+        p[6] -= h01 * v01 + h11 * v11 + h21 * v21
+        p[7] -= h01 * v02 + h11 * v12 + h21 * v22
+        p[8] -= h01 * v03 + h11 * v13 + h21 * v23
+        p[9] -= h01 * v04 + h11 * v14 + h21 * v24
+        p[10] -= h01 * v05 + h11 * v15 + h21 * v25
+        p[11] -= h02 * v02 + h12 * v12 + h22 * v22
+        p[12] -= h02 * v03 + h12 * v13 + h22 * v23
+        p[13] -= h02 * v04 + h12 * v14 + h22 * v24
+        p[14] -= h02 * v05 + h12 * v15 + h22 * v25
+        p[15] -= h03 * v03 + h13 * v13 + h23 * v23
+        p[16] -= h03 * v04 + h13 * v14 + h23 * v24
+        p[17] -= h03 * v05 + h13 * v15 + h23 * v25
+        p[18] -= h04 * v04 + h14 * v14 + h24 * v24
+        p[19] -= h04 * v05 + h14 * v15 + h24 * v25
+        p[20] -= h05 * v05 + h15 * v15 + h25 * v25
         return nis
 
-    # --- 2D position measurement (RF) ----------------------------------------------------
+    # --- 2D position measurement (RF) ---------------------------------------------------
     def nis2(self, z0: float, z1: float, r: PackedR) -> float:
         """Normalised innovation squared of a 2D (east, north) position."""
         p = self.P
         x = self.x
         s00 = p[0] + r[0]
         s01 = p[1] + r[1]
-        s11 = p[7] + r[2]
+        s11 = p[6] + r[2]
         y0 = z0 - x[0]
         y1 = z1 - x[1]
         return (s11 * y0 * y0 - 2.0 * s01 * y0 * y1 + s00 * y1 * y1) / (s00 * s11 - s01 * s01)
 
-    def update2(self, z0: float, z1: float, r: PackedR, gate: float = float("inf")) -> float:
+    def update2(self, z0: float, z1: float, r: PackedR, gate: float = _INF) -> float:
         """Joseph-form update with a 2D position; returns the NIS of the innovation.
 
-        With ``gate`` given, a measurement whose NIS exceeds it leaves the state untouched
-        (the caller sees the NIS and knows it was rejected).
+        With ``gate`` given, a measurement whose NIS exceeds it (or is NaN) leaves the
+        state untouched; the caller compares the returned NIS with the gate.
         """
         p = self.P
         x = self.x
         s00 = p[0] + r[0]
         s01 = p[1] + r[1]
-        s11 = p[7] + r[2]
+        s11 = p[6] + r[2]
         d = 1.0 / (s00 * s11 - s01 * s01)
         i00 = s11 * d
         i01 = -s01 * d
@@ -290,11 +292,11 @@ class CvKalman:
         u0 = i00 * y0 + i01 * y1
         u1 = i01 * y0 + i11 * y1
         nis = y0 * u0 + y1 * u1
-        if not nis <= gate:
+        if not nis <= gate:  # also NaN
             return nis
         # rows of HP (the first rows of P)
-        h00, h01, h02, h03, h04, h05 = p[0:6]
-        h10, h11, h12, h13, h14, h15 = p[6:12]
+        h00, h01, h02, h03, h04, h05 = p[0], p[1], p[2], p[3], p[4], p[5]
+        h10, h11, h12, h13, h14, h15 = p[1], p[6], p[7], p[8], p[9], p[10]
         # x += (HP)^T S^-1 y
         x[0] += h00 * u0 + h10 * u1
         x[1] += h01 * u0 + h11 * u1
@@ -302,7 +304,7 @@ class CvKalman:
         x[3] += h03 * u0 + h13 * u1
         x[4] += h04 * u0 + h14 * u1
         x[5] += h05 * u0 + h15 * u1
-        # M = S^-1 S, J = 2 S^-1 - M S^-1 (the Joseph form's middle factor)
+        # M = S^-1 S, J = 2 S^-1 - M S^-1: the Joseph form's middle factor
         m00 = i00 * s00 + i01 * s01
         m01 = i00 * s01 + i01 * s11
         m10 = i01 * s00 + i11 * s01
@@ -323,26 +325,26 @@ class CvKalman:
         v13 = j01 * h03 + j11 * h13
         v14 = j01 * h04 + j11 * h14
         v15 = j01 * h05 + j11 * h15
-        # P -= (HP)^T V: upper triangle, mirrored
-        p[0] = p[0] - (h00 * v00 + h10 * v10)
-        p[1] = p[6] = p[1] - (h00 * v01 + h10 * v11)
-        p[2] = p[12] = p[2] - (h00 * v02 + h10 * v12)
-        p[3] = p[18] = p[3] - (h00 * v03 + h10 * v13)
-        p[4] = p[24] = p[4] - (h00 * v04 + h10 * v14)
-        p[5] = p[30] = p[5] - (h00 * v05 + h10 * v15)
-        p[7] = p[7] - (h01 * v01 + h11 * v11)
-        p[8] = p[13] = p[8] - (h01 * v02 + h11 * v12)
-        p[9] = p[19] = p[9] - (h01 * v03 + h11 * v13)
-        p[10] = p[25] = p[10] - (h01 * v04 + h11 * v14)
-        p[11] = p[31] = p[11] - (h01 * v05 + h11 * v15)
-        p[14] = p[14] - (h02 * v02 + h12 * v12)
-        p[15] = p[20] = p[15] - (h02 * v03 + h12 * v13)
-        p[16] = p[26] = p[16] - (h02 * v04 + h12 * v14)
-        p[17] = p[32] = p[17] - (h02 * v05 + h12 * v15)
-        p[21] = p[21] - (h03 * v03 + h13 * v13)
-        p[22] = p[27] = p[22] - (h03 * v04 + h13 * v14)
-        p[23] = p[33] = p[23] - (h03 * v05 + h13 * v15)
-        p[28] = p[28] - (h04 * v04 + h14 * v14)
-        p[29] = p[34] = p[29] - (h04 * v05 + h14 * v15)
-        p[35] = p[35] - (h05 * v05 + h15 * v15)
+        # P -= (HP)^T V (upper triangle)
+        p[0] -= h00 * v00 + h10 * v10
+        p[1] -= h00 * v01 + h10 * v11
+        p[2] -= h00 * v02 + h10 * v12
+        p[3] -= h00 * v03 + h10 * v13
+        p[4] -= h00 * v04 + h10 * v14
+        p[5] -= h00 * v05 + h10 * v15
+        p[6] -= h01 * v01 + h11 * v11
+        p[7] -= h01 * v02 + h11 * v12
+        p[8] -= h01 * v03 + h11 * v13
+        p[9] -= h01 * v04 + h11 * v14
+        p[10] -= h01 * v05 + h11 * v15
+        p[11] -= h02 * v02 + h12 * v12
+        p[12] -= h02 * v03 + h12 * v13
+        p[13] -= h02 * v04 + h12 * v14
+        p[14] -= h02 * v05 + h12 * v15
+        p[15] -= h03 * v03 + h13 * v13
+        p[16] -= h03 * v04 + h13 * v14
+        p[17] -= h03 * v05 + h13 * v15
+        p[18] -= h04 * v04 + h14 * v14
+        p[19] -= h04 * v05 + h14 * v15
+        p[20] -= h05 * v05 + h15 * v15
         return nis

@@ -37,7 +37,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.stats import chi2
 
-from uav_fusion.core.estimator.kalman import CvKalman, PackedR, pack_r
+from uav_fusion.core.estimator.kalman import CvKalman, PackedR, expand_upper, pack_r
 from uav_fusion.core.estimator.profile import Profile
 from uav_fusion.core.records import RADAR, RF, Measurement
 from uav_fusion.core.site import Site
@@ -52,15 +52,19 @@ DISCARDED = "discarded"
 STATUSES = (UPDATED, COASTED, INITIALISED, RESET, DISCARDED)
 USED = frozenset((UPDATED, INITIALISED, RESET))
 
+_DIMS = {RADAR: 3, RF: 2}
+_MEAS_KEY = {RADAR: "radar_measurements", RF: "rf_measurements"}
+_UPD_KEY = {RADAR: "updated_radar", RF: "updated_rf"}
 _NAN6 = (math.nan,) * 6
-_NAN36 = (math.nan,) * 36
+_NAN21 = (math.nan,) * 21
 
 
 class Step:
     """What the estimator did with one measurement, and the estimate at its time.
 
     ``x`` (6,) and ``P`` (6, 6) are the state after this measurement (NaN when no track
-    exists); they are built on first access from the filter's internal copy.
+    exists); they are built on first access from the filter's internal copy (``P`` is kept
+    as its 21-value upper triangle).
     """
 
     __slots__ = (
@@ -113,7 +117,7 @@ class Step:
     @property
     def P(self) -> FloatArray:
         if self._P is None:
-            self._P = np.array(self._Pl, dtype=float).reshape(6, 6)
+            self._P = expand_upper(self._Pl)
         return self._P
 
     @property
@@ -151,10 +155,13 @@ class FusionEstimator:
         self.gate_threshold: dict[int, float] = {
             d: float(chi2.ppf(profile.nis_probability, d)) for d in (2, 3)
         }
+        self._g2 = self.gate_threshold[2]
+        self._g3 = self.gate_threshold[3]
         self.range_gate_m = (
             profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
         )
         self._radar_pos = tuple(float(v) for v in site.radar.enu)
+        self._gate2 = float(self.range_gate_m) ** 2
         self._init_sources = frozenset(profile.init_sources)
         self._max_rej = profile.max_consecutive_rejections
         self._max_coast = profile.max_coast_s
@@ -183,15 +190,23 @@ class FusionEstimator:
 
     def process(self, m: Measurement) -> list[Step]:
         """Process one measurement; returns the step it produced."""
-        self._count("measurements")
+        c = self.counters
+        c["measurements"] = c.get("measurements", 0) + 1
         z = m.z.tolist()
         pre = self._pre(m, z)
         if pre is not None:
             return [pre]
         if not self.active:
             return [self._initialise(m)]
-        nis = self._update(m, z, self._rp(m))
-        if nis <= self.gate_threshold[m.dim]:
+        kf = self._kf
+        r = self._r[m.source] if m.R is None else pack_r(m.R)
+        if len(z) == 3:
+            g = self._g3
+            nis = kf.update3(z[0], z[1], z[2], r, g)
+        else:
+            g = self._g2
+            nis = kf.update2(z[0], z[1], r, g)
+        if nis <= g:
             return [self._used(m, nis)]
         return [self._rejected(m, nis)]
 
@@ -264,42 +279,47 @@ class FusionEstimator:
 
     def _pre(self, m: Measurement, z: list[float]) -> Step | None:
         """Time handling and pre-gates; a Step when the measurement goes no further."""
-        if m.source not in (RADAR, RF) or len(z) != (3 if m.source == RADAR else 2):
-            raise ValueError(f"measurement seq {m.seq}: {m.source!r} with {len(z)} values")
-        self._count(f"{m.source}_measurements")
-        if not all(math.isfinite(v) for v in z) or not math.isfinite(m.t):
+        src = m.source
+        if len(z) != _DIMS.get(src):
+            raise ValueError(f"measurement seq {m.seq}: {src!r} with {len(z)} values")
+        c = self.counters
+        key = _MEAS_KEY[src]
+        c[key] = c.get(key, 0) + 1
+        t = m.t
+        if not math.isfinite(t + sum(z)):
             return self._discard(m, "invalid")
         if self.active:
-            assert self.t is not None
-            dt = m.t - self.t
+            dt = t - self.t  # type: ignore[operator]
             if dt < 0:
                 return self._discard(m, "out_of_order")
             if (
                 self._max_coast is not None
                 and self.last_used_t is not None
-                and m.t - self.last_used_t > self._max_coast
+                and t - self.last_used_t > self._max_coast
             ):
                 self.reset("max_coast")
             else:
                 self._kf.predict(dt)
-                self.t = m.t
-        elif self.t is not None and m.t < self.t:
+                self.t = t
+        elif self.t is not None and t < self.t:
             return self._discard(m, "out_of_order")
-        if m.source == RADAR:
+        if src == RADAR:
             rx, ry, rz = self._radar_pos
-            d = math.sqrt((z[0] - rx) ** 2 + (z[1] - ry) ** 2 + (z[2] - rz) ** 2)
-            if not d <= self.range_gate_m:
+            dx = z[0] - rx
+            dy = z[1] - ry
+            dz = z[2] - rz
+            if not dx * dx + dy * dy + dz * dz <= self._gate2:
                 return self._discard(m, "range_gate")
             mp = self.profile.min_uav_prob
             if mp is not None and (m.uav_prob is None or m.uav_prob < mp):
                 return self._discard(m, "class_prob")
-        if not self.active and m.source not in self._init_sources:
+        if not self.active and src not in self._init_sources:
             return self._discard(m, "no_track")
         return None
 
     def _update(self, m: Measurement, z: list[float], r: PackedR) -> float:
-        g = self.gate_threshold[m.dim]
-        if m.dim == 3:
+        g = self._g3 if len(z) == 3 else self._g2
+        if len(z) == 3:
             return self._kf.update3(z[0], z[1], z[2], r, g)
         return self._kf.update2(z[0], z[1], r, g)
 
@@ -309,7 +329,7 @@ class FusionEstimator:
             x: Sequence[float] = tuple(kf.x)
             P: Sequence[float] = tuple(kf.P)
         else:
-            x, P = _NAN6, _NAN36
+            x, P = _NAN6, _NAN21
         return Step(m.t, m.source, status, reason, nis, x, P, m.dim, m.track_id, m.seq)
 
     def _discard(self, m: Measurement, reason: str, nis: float | None = None) -> Step:
@@ -318,11 +338,25 @@ class FusionEstimator:
         return self._snapshot(m, DISCARDED, reason, nis)
 
     def _used(self, m: Measurement, nis: float) -> Step:
-        self._count(UPDATED)
-        self._count(f"updated_{m.source}")
+        c = self.counters
+        c[UPDATED] = c.get(UPDATED, 0) + 1
+        key = _UPD_KEY[m.source]
+        c[key] = c.get(key, 0) + 1
         self.consecutive_rejections = 0
         self.last_used_t = m.t
-        return self._snapshot(m, UPDATED, None, nis)
+        kf = self._kf
+        return Step(
+            m.t,
+            m.source,
+            UPDATED,
+            None,
+            nis,
+            tuple(kf.x),
+            tuple(kf.P),
+            m.dim,
+            m.track_id,
+            m.seq,
+        )
 
     def _rejected(self, m: Measurement, nis: float) -> Step:
         self._count(COASTED)
