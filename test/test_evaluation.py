@@ -355,3 +355,55 @@ def test_steps_are_classed_by_their_updated_and_coasted_flags() -> None:
     assert res.step_status == {"updated": 1, "coasted": 1, "reset": 1}
     assert res.row("radar_validated").stats.mean == pytest.approx(2.0)
     assert res.steps == 2
+
+
+def _synthetic_flight() -> tuple[object, object]:
+    from uav_fusion.core.estimator.synthetic import simulate_stream, stream_to_flight
+    from uav_fusion.core.records import RadarTrack
+    from uav_fusion.core.site import load_site
+
+    site = load_site()
+    stream = simulate_stream(
+        seed=4,
+        duration_s=120.0,
+        q=(2.0, 2.0, 2.0),
+        r_radar=np.diag([225.0, 225.0, 225.0]),
+        r_rf=np.diag([900.0, 900.0]),
+        outlier_rate={"rf": 0.2, "radar": 0.05},
+        x0=np.array([300.0, -100.0, 50.0, -3.0, 2.0, 0.0]),
+    )
+    t_bird = stream.measurements[40].t
+    birds = [
+        RadarTrack(t_bird + 0.01 * k, 77, 0.0, 0.0, 0.0, 200.0 + k, 100.0, 30.0, None, 0.1,
+                   None, -20.0)
+        for k in range(5)
+    ]
+    return site, stream_to_flight(stream, site, extra_tracks=birds, failed_rf_every=7)
+
+
+def test_offline_evaluation_counts_agree_with_the_estimator() -> None:
+    from uav_fusion.commands.evaluate import evaluate_flight
+    from uav_fusion.core.estimator import load_profile, run_flight
+    from uav_fusion.core.records import Flight
+    from uav_fusion.core.site import Site
+
+    site, flight = _synthetic_flight()
+    assert isinstance(site, Site) and isinstance(flight, Flight)
+    ev, info = evaluate_flight(flight, "paper", site)
+    counts = run_flight(flight, load_profile("paper"), site).paper_counts()
+    assert ev.row("kf_all").stats.count == counts["all_steps"]
+    assert ev.row("kf_updated").stats.count == counts["updated_estimates"]
+    assert ev.row("kf_coasted").stats.count == counts["coasted_estimates"]
+    assert ev.row("radar_validated").stats.count == counts["radar_accepted"]
+    assert ev.row("rf_validated").stats.count == counts["rf_accepted"]
+    assert ev.rf_attempts == counts["rf_attempts"]
+    assert ev.row("rf_raw").stats.count == counts["rf_fixes"]
+    all_reports = sum(len(f.tracks) for f in flight.radar)
+    assert ev.radar_reports == all_reports  # the paper profile has no class threshold
+    assert ev.dropped == {}
+    assert "steps in" in info["filter run"]
+    # the class threshold of the raw row leaves the bird track (catProb 0.1) out
+    ev_uav, info_uav = evaluate_flight(flight, "paper", site, raw_min_uav_prob=0.5)
+    assert ev_uav.radar_reports == all_reports - 5
+    assert "0.5" in info_uav["raw radar row"]
+    assert ev_uav.row("kf_all").stats.count == counts["all_steps"]

@@ -32,16 +32,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="age limit of an estimate for the time coverage (default: 1 s)")
     parser.add_argument("--max-truth-gap", type=float, default=2.0, metavar="S",
                         help="longest truth gap interpolated across (default: 2 s)")
+    parser.add_argument("--raw-min-uav-prob", type=float, default=None, metavar="P",
+                        help="UAV class threshold (catProb[0]) for the raw radar row "
+                        "(default: the profile's min_uav_prob, as radar_replay uses)")
     parser.add_argument("--strict", action="store_true",
                         help="stop at the first bad input row instead of skipping it")
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
 
 
 def uav_class_tracks(flight: Flight, min_uav_prob: float | None) -> list[RadarTrack]:
-    """The raw radar row: every report the radar classed as a UAV (before selection/gating).
-
-    With no class threshold every track report counts.
-    """
+    """The raw radar row: every report the radar classed as a UAV (before selection/gating),
+    i.e. ``catProb[0] >= min_uav_prob`` (the profile's threshold), every report when None.
+    This is the rule radar_replay applies to its ``radar/raw`` topic."""
     out: list[RadarTrack] = []
     for frame in flight.radar:
         for trk in frame.tracks:
@@ -57,8 +59,13 @@ def evaluate_flight(
     site: Site,
     tolerance_s: float = 1.0,
     max_truth_gap_s: float = 2.0,
+    raw_min_uav_prob: float | None = None,
 ) -> tuple[Evaluation, dict[str, str]]:
-    """Run the estimator on ``flight`` and score every stage; returns (evaluation, run info)."""
+    """Run the estimator on ``flight`` and score every stage; returns (evaluation, run info).
+
+    The raw radar row takes the reports with ``catProb[0] >= raw_min_uav_prob``, or the
+    profile's ``min_uav_prob`` when that is None (every report when both are None).
+    """
     from uav_fusion.core import estimator as est
 
     profile = est.load_profile(profile_name)
@@ -77,7 +84,8 @@ def evaluate_flight(
             measurements.extend(item)
         else:
             measurements.append(item)
-    feed_flight(ev, flight, uav_class_tracks(flight, _min_uav_prob(profile)))
+    raw_thr = profile.min_uav_prob if raw_min_uav_prob is None else raw_min_uav_prob
+    feed_flight(ev, flight, uav_class_tracks(flight, raw_thr))
     feed_steps(ev, result.steps, measurements)
     info = {
         "mode": "offline (uav_fusion evaluate)",
@@ -85,15 +93,13 @@ def evaluate_flight(
         "profile": profile_name,
         "site": str(site.source or site.name),
         "filter run": f"{len(result.steps)} steps in {elapsed:.2f} s",
+        "raw radar row": "every radar report"
+        if raw_thr is None
+        else f"radar reports with UAV class probability >= {raw_thr:g}",
     }
     for name, rep in sorted(flight.reports.items()):
         info[f"input {name}"] = rep.summary()
     return ev.evaluate(), info
-
-
-def _min_uav_prob(profile: object) -> float | None:
-    v = getattr(profile, "min_uav_prob", None)
-    return None if v is None else float(v)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -102,7 +108,9 @@ def run(args: argparse.Namespace) -> int:
     site = load_site(args.site)
     folder = Path(args.folder) if args.folder else data_path(DEFAULT_FLIGHT)
     flight = load_flight(folder, site, rf_file=args.rf_file, strict=args.strict)
-    ev, info = evaluate_flight(flight, args.profile, site, args.tolerance, args.max_truth_gap)
+    ev, info = evaluate_flight(
+        flight, args.profile, site, args.tolerance, args.max_truth_gap, args.raw_min_uav_prob
+    )
     out = Path(args.out) if args.out else Path("out") / "evaluate" / flight.name
     files: ReportFiles = write_report(ev, out, site, info, figures=not args.no_figures)
     print(format_table(ev))

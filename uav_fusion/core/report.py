@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
 from uav_fusion.core.errors import UavFusionError
@@ -287,9 +288,10 @@ def _draw_site(ax: Axes, site: Site | None) -> None:
     for name, tw in site.towers.items():
         marker, color = ("^", "tab:purple") if name in rf else ("s", "dimgray")
         ax.plot(tw.enu[0], tw.enu[1], marker, color=color, ms=9, mec="black", zorder=5)
-        label = f"{name} (origin)" if abs(tw.enu[0]) < 1 and abs(tw.enu[1]) < 1 else name
-        ax.annotate(label, (tw.enu[0], tw.enu[1]), xytext=(6, 6), textcoords="offset points",
-                    fontsize=9, weight="bold", zorder=6)
+        origin = abs(tw.enu[0]) < 1 and abs(tw.enu[1]) < 1
+        label = f"{name} (origin)" if origin else name
+        ax.annotate(label, (tw.enu[0], tw.enu[1]), xytext=(6, -14) if origin else (6, 6),
+                    textcoords="offset points", fontsize=9, weight="bold", zorder=6)
     r = site.radar
     ax.plot(r.enu[0], r.enu[1], "*", color="tab:red", ms=15, mec="black", zorder=6)
     ax.annotate("radar", (r.enu[0], r.enu[1]), xytext=(6, -12), textcoords="offset points",
@@ -304,6 +306,20 @@ def _site_legend_handles(ax: Axes, site: Site | None) -> None:
     ax.plot([], [], "*", color="tab:red", mec="black", ms=12, label="radar")
 
 
+def _view_limits(ev: Evaluation, site: Site | None) -> tuple[float, float, float, float] | None:
+    """East/north limits framing the truth path and the site, with a margin."""
+    pts = [ev.truth_enu[:, :2]] if ev.truth_t.size else []
+    if site is not None:
+        pts.append(np.array([t.enu[:2] for t in site.towers.values()]))
+        pts.append(np.array([site.radar.enu[:2]]))
+    if not pts:
+        return None
+    xy = np.concatenate(pts)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    pad = 0.08 * float(max(hi[0] - lo[0], hi[1] - lo[1], 100.0))
+    return float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad)
+
+
 def figure_error_trajectory(
     ev: Evaluation, path: Path, key: str, site: Site | None, title: str
 ) -> Path | None:
@@ -313,15 +329,28 @@ def figure_error_trajectory(
         return None
     fig, ax = _new_figure((8.0, 8.0))
     if ev.truth_t.size:
-        ax.plot(ev.truth_enu[:, 0], ev.truth_enu[:, 1], color="0.6", lw=1.0, label="truth")
-    vmax = float(np.percentile(s.err[ok], 99))
-    sc = ax.scatter(s.pos[ok, 0], s.pos[ok, 1], c=s.err[ok], s=6, cmap="viridis",
-                    vmin=0.0, vmax=max(vmax, 1e-3), zorder=3)
-    fig.colorbar(sc, ax=ax, label=f"3D position error (m; colour scale capped at p99 = {vmax:.0f})",
-                 shrink=0.8)
+        ax.plot(ev.truth_enu[:, 0], ev.truth_enu[:, 1], color="0.6", lw=1.0, label="truth",
+                zorder=2)
+    err = s.err[ok]
+    # errors span decades (metres to kilometres): a log colour scale keeps both readable
+    vmin = max(float(np.min(err)), 1.0)
+    vmax = max(float(np.max(err)), 10.0 * vmin)
+    sc = ax.scatter(s.pos[ok, 0], s.pos[ok, 1], c=np.clip(err, vmin, None), s=6, cmap="viridis",
+                    norm=LogNorm(vmin=vmin, vmax=vmax), zorder=3)
+    fig.colorbar(sc, ax=ax, label="position error (m, log colour scale)", shrink=0.8)
     _draw_site(ax, site)
     _site_legend_handles(ax, site)
-    ax.set_aspect("equal", adjustable="datalim")
+    lim = _view_limits(ev, site)
+    if lim is not None:
+        x0, x1, y0, y1 = lim
+        outside = int(np.count_nonzero(
+            (s.pos[ok, 0] < x0) | (s.pos[ok, 0] > x1) | (s.pos[ok, 1] < y0) | (s.pos[ok, 1] > y1)
+        ))
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        if outside:
+            title += f"\n({outside} of {int(ok.sum())} points lie outside this view)"
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("east of LW1 (m)")
     ax.set_ylabel("north of LW1 (m)")
     ax.set_title(title)
