@@ -264,3 +264,29 @@ def test_write_report_failure_is_reported_not_raised(ros: None, tmp_path: Path) 
     assert not resp.success
     assert "cannot create the report folder" in resp.message
     node.destroy_node()
+
+
+def test_bad_parameters_are_refused_with_their_name(ros: None) -> None:
+    from uav_fusion.params import ParamError
+
+    with pytest.raises(ParamError, match="coverage_tolerance_s"):
+        EvaluatorNode(parameter_overrides=[Parameter("coverage_tolerance_s", value=-1.0)])
+    with pytest.raises(ParamError, match="truth_topic"):
+        EvaluatorNode(parameter_overrides=[Parameter("truth_topic", value=" ")])
+
+
+def test_output_dir_can_change_at_run_time(ros: None, tmp_path: Path) -> None:
+    node = EvaluatorNode(
+        parameter_overrides=[
+            Parameter("output_dir", value=str(tmp_path / "a")),
+            Parameter("write_on_shutdown", value=False),
+            Parameter("log_period_s", value=0.0),
+            Parameter("figures", value=False),
+        ]
+    )
+    res = node.set_parameters([Parameter("output_dir", value=str(tmp_path / "b"))])
+    assert res[0].successful
+    assert not node.set_parameters([Parameter("coverage_tolerance_s", value=2.0)])[0].successful
+    files = node.write_report()
+    assert files.folder == tmp_path / "b" and files.json.is_file()
+    node.destroy_node()

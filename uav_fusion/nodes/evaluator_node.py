@@ -51,10 +51,38 @@ from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
 from uav_fusion.core.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
+from uav_fusion.params import Param, declare_all, not_empty
 
 M = TypeVar("M")
 
 NODE_NAME = "evaluator_node"
+
+PARAMS: tuple[Param, ...] = (
+    Param("site_file", "", "site YAML ('' = the shipped site)"),
+    Param("truth_topic", "truth/fix", "RTK truth (NavSatFix)", check=not_empty),
+    Param("radar_raw_topic", "radar/raw", "every UAV-class radar report", check=not_empty),
+    Param("rf_topic", "rf/fix", "every RF attempt (failed = NaN point)", check=not_empty),
+    Param("accepted_radar_topic", "fusion/accepted/radar", "accepted radar measurements",
+          check=not_empty),
+    Param("accepted_rf_topic", "fusion/accepted/rf", "accepted RF measurements",
+          check=not_empty),
+    Param("odom_updated_topic", "fusion/odom/updated", "updated steps (Odometry)",
+          check=not_empty),
+    Param("odom_coasted_topic", "fusion/odom/coasted", "coasted steps (Odometry)",
+          check=not_empty),
+    Param("frame_id", "", "expected ENU frame of the estimates ('' = the site's frame_id)"),
+    Param("output_dir", "out/report", "report folder", check=not_empty, read_only=False),
+    Param("coverage_tolerance_s", 1.0, "age limit of a sample for the time coverage (s)",
+          lo=0.0, hi=3600.0),
+    Param("max_truth_gap_s", 2.0, "longest truth gap interpolated across (s)", lo=1e-3,
+          hi=3600.0),
+    Param("log_period_s", 5.0, "period of the summary log and /diagnostics (s; 0 = off)",
+          lo=0.0, hi=3600.0),
+    Param("write_on_shutdown", True, "write the report when the node stops", read_only=False),
+    Param("figures", True, "draw the PNG figures", read_only=False),
+    Param("qos_depth", 1000, "subscription queue depth", lo=1, hi=1_000_000),
+    Param("flight_name", "", "flight name written into the report", read_only=False),
+)
 
 
 class EvaluatorNode(Node):
@@ -62,24 +90,24 @@ class EvaluatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        p = self.declare_parameter
-        site_file = str(p("site_file", "").value)
-        self.truth_topic = str(p("truth_topic", "truth/fix").value)
-        self.radar_raw_topic = str(p("radar_raw_topic", "radar/raw").value)
-        self.rf_topic = str(p("rf_topic", "rf/fix").value)
-        self.accepted_radar_topic = str(p("accepted_radar_topic", "fusion/accepted/radar").value)
-        self.accepted_rf_topic = str(p("accepted_rf_topic", "fusion/accepted/rf").value)
-        self.updated_topic = str(p("odom_updated_topic", "fusion/odom/updated").value)
-        self.coasted_topic = str(p("odom_coasted_topic", "fusion/odom/coasted").value)
-        frame = str(p("frame_id", "").value)
-        self.output_dir = Path(str(p("output_dir", "out/report").value))
-        tolerance = float(p("coverage_tolerance_s", 1.0).value)
-        max_gap = float(p("max_truth_gap_s", 2.0).value)
-        self.log_period_s = float(p("log_period_s", 5.0).value)
-        self.write_on_shutdown = bool(p("write_on_shutdown", True).value)
-        self.figures = bool(p("figures", True).value)
-        depth = int(p("qos_depth", 1000).value)
-        self.flight_name = str(p("flight_name", "").value)
+        v = declare_all(self, PARAMS)
+        site_file = str(v["site_file"])
+        self.truth_topic = str(v["truth_topic"])
+        self.radar_raw_topic = str(v["radar_raw_topic"])
+        self.rf_topic = str(v["rf_topic"])
+        self.accepted_radar_topic = str(v["accepted_radar_topic"])
+        self.accepted_rf_topic = str(v["accepted_rf_topic"])
+        self.updated_topic = str(v["odom_updated_topic"])
+        self.coasted_topic = str(v["odom_coasted_topic"])
+        frame = str(v["frame_id"])
+        self.output_dir = Path(str(v["output_dir"]))
+        tolerance = float(v["coverage_tolerance_s"])
+        max_gap = float(v["max_truth_gap_s"])
+        self.log_period_s = float(v["log_period_s"])
+        self.write_on_shutdown = bool(v["write_on_shutdown"])
+        self.figures = bool(v["figures"])
+        depth = int(v["qos_depth"])
+        self.flight_name = str(v["flight_name"])
 
         try:
             self.site: Site = load_site(site_file or None)
@@ -237,7 +265,16 @@ class EvaluatorNode(Node):
         arr.status.append(inp)
         return arr
 
+    def _refresh_runtime_params(self) -> None:
+        """Re-read the parameters that may change while running (set_parameters)."""
+        self.output_dir = Path(str(self.get_parameter("output_dir").value))
+        self.figures = bool(self.get_parameter("figures").value)
+        self.write_on_shutdown = bool(self.get_parameter("write_on_shutdown").value)
+        self.flight_name = str(self.get_parameter("flight_name").value)
+
     def write_report(self) -> ReportFiles:
+        """Score everything received so far and write the report to ``output_dir``."""
+        self._refresh_runtime_params()
         ev = self.evaluate()
         info = {
             "mode": f"live ({NODE_NAME})",
@@ -290,6 +327,7 @@ def main(args: list[str] | None = None) -> int:
         return 2
     finally:
         if node is not None:
+            node._refresh_runtime_params()
             if node.write_on_shutdown:
                 try:
                     files = node.write_report()
