@@ -307,3 +307,10 @@ def test_command_line_plays_a_bag(tmp_path: Path) -> None:
     assert proc.returncode == 0, out
     assert received == [point(0), point(1), point(2)]
     assert "played 3 messages" in out[0]
+
+
+def test_without_subscribers_it_waits_then_plays_anyway(ros: None, tmp_path: Path) -> None:
+    bag = make_bag(tmp_path / "b", [0.0, 0.01])
+    s = sink({"/unrelated": PointStamped})
+    player = play(s, bag, 0, wait_timeout=0.3)
+    assert player.played == Counter({"/a": 2}) and s.got == []

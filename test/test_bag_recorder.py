@@ -152,6 +152,30 @@ def test_split_by_size_keeps_every_message(ros: None, tmp_path: Path) -> None:
     assert r.message_count == 300 and r.warnings == []
 
 
+def test_all_topics_records_data_topics_but_not_graph_bookkeeping(
+    ros: None, tmp_path: Path
+) -> None:
+    topic = f"/t{uuid.uuid4().hex[:8]}/anything"
+    rec = BagRecorder(str(tmp_path / "all"), parameter_overrides=[
+        Parameter("all_topics", value=True)])
+    src = Node("source_all")
+    pub = src.create_publisher(PointStamped, topic, QoSProfile(depth=100))
+    ex = SingleThreadedExecutor()
+    ex.add_node(rec)
+    ex.add_node(src)
+    wait_matched(ex, [pub])
+    for i in range(20):
+        pub.publish(point_msg(i))
+    deadline = time.monotonic() + 10
+    while rec.received[topic] < 20 and time.monotonic() < deadline:
+        ex.spin_once(timeout_sec=0.02)
+    rec.close()
+    ex.shutdown()
+    r = BagReader(tmp_path / "all")
+    assert r.topics[topic].count == 20
+    assert "/rosout" not in r.topics and "/parameter_events" not in r.topics
+
+
 def test_bad_parameters(ros: None, tmp_path: Path) -> None:
     (tmp_path / "exists").mkdir()
     with pytest.raises(ConfigError, match="exists already"):
