@@ -489,8 +489,12 @@ def rows_summary(ev: Evaluation, keys: Iterable[str] = ROW_KEYS) -> str:
     parts = []
     for k in keys:
         r = ev.row(k)
+        if r.stats.count == 0:
+            parts.append(f"{k} n=0")
+            continue
         parts.append(
-            f"{k} n={r.stats.count} mean={_f(r.stats.mean, 1)} cov={_f(r.stats.coverage_pct, 1)}%"
+            f"{k} n={r.stats.count} mean={_f(r.stats.mean, 1)} m "
+            f"cov={_f(r.stats.coverage_pct, 1)}%"
         )
     return "; ".join(parts)
 
