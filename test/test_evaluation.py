@@ -16,6 +16,7 @@ from uav_fusion.core.evaluation import (
     Evaluator,
     feed_steps,
     format_table,
+    rows_summary,
     time_coverage_pct,
 )
 from uav_fusion.core.records import Measurement
@@ -313,6 +314,7 @@ def test_empty_evaluator_gives_empty_rows_and_a_table() -> None:
     assert all(r.stats.count == 0 for r in res.rows)
     text = format_table(res)
     assert "KF coasted estimates (3D)" in text
+    assert rows_summary(res).startswith("rf_raw n=0; radar_raw n=0;")
     json.dumps(res.as_dict(), allow_nan=False)  # NaNs are written as null
 
 
