@@ -20,6 +20,7 @@ Definitions (all errors against truth linearly interpolated at the measurement t
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -129,7 +130,7 @@ def calibrate(
     beyond = dist > range_gate_m
     edges = [*range_bins, math.inf]
     bins = []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+    for lo, hi in itertools.pairwise(edges):
         m = (dist >= lo) & (dist < hi)
         bins.append(RangeBinStats(lo, hi, error_stats(rerr[m], int(np.sum(m)))))
     frame_t = np.array([fr.t for fr in flight.radar if fr.tracks], dtype=float)
@@ -138,7 +139,9 @@ def calibrate(
     n_other = sum(1 for fr in flight.radar for tr in fr.tracks if tr.track_id in other_ids)
     rcs_a = np.asarray(rcs, dtype=float)
     rcs_t = (
-        (float(rcs_a.min()), float(rcs_a.mean()), float(rcs_a.max())) if rcs_a.size else (math.nan,) * 3
+        (float(rcs_a.min()), float(rcs_a.mean()), float(rcs_a.max()))
+        if rcs_a.size
+        else (math.nan,) * 3
     )
     if frame_t.size == 0:
         notes.append("no radar frame carries a track")
@@ -205,7 +208,10 @@ def _row(name: str, s: ErrorStats) -> str:
 
 def format_calibration(res: CalibrationResult) -> str:
     """A readable Markdown report of a :class:`CalibrationResult`."""
-    head = "| stage | count | min m | max m | mean m | std m | coverage % |\n|---|---|---|---|---|---|---|"
+    head = (
+        "| stage | count | min m | max m | mean m | std m | coverage % |\n"
+        "|---|---|---|---|---|---|---|"
+    )
     lines = [
         f"## Raw sensor errors before fusion: {res.flight}",
         "",
@@ -242,7 +248,8 @@ def format_calibration(res: CalibrationResult) -> str:
         _row("north (N >= split)", res.rf_north),
         _row("south (N < split)", res.rf_south),
         "",
-        f"Median RF error: north {res.rf_north_median_m:.1f} m, south {res.rf_south_median_m:.1f} m.",
+        f"Median RF error: north {res.rf_north_median_m:.1f} m, "
+        f"south {res.rf_south_median_m:.1f} m.",
     ]
     for n in res.notes:
         lines.append(f"Note: {n}")

@@ -123,7 +123,8 @@ def site_with_sensors(
     if radar_tower is not None and radar_tower != site.radar.tower:
         if radar_tower not in site.towers:
             raise ConfigError(
-                f"unknown radar tower {radar_tower!r}; the site has {', '.join(sorted(site.towers))}"
+                f"unknown radar tower {radar_tower!r}; "
+                f"the site has {', '.join(sorted(site.towers))}"
             )
         tw = site.towers[radar_tower]
         r = site.radar
@@ -153,7 +154,7 @@ def _truth_log(
 ) -> TruthLog:
     tc = cfg.truth
     step_us = round(1e6 / tc.rate_hz)
-    n = int(math.floor(traj.duration * 1e6 / step_us)) + 1
+    n = math.floor(traj.duration * 1e6 / step_us) + 1
     rel_us = np.arange(n, dtype=np.int64) * step_us
     t_rel = rel_us / 1e6
     pos = traj.position(t_rel)
@@ -176,14 +177,18 @@ def _truth_log(
     vel_ned = np.column_stack([vel[:, 1], vel[:, 0], -vel[:, 2]])
     att = traj.attitude(t_rel)
     minutes = t_rel / 60.0
-    battery = tc.battery_full_v - tc.battery_drop_v_per_min * minutes + rng.normal(
-        0.0, tc.battery_noise_v, n
+    battery = (
+        tc.battery_full_v
+        - tc.battery_drop_v_per_min * minutes
+        + rng.normal(0.0, tc.battery_noise_v, n)
     )
     fix = np.full(n, tc.fix_type, dtype=np.int64)
     sats = rng.integers(tc.num_sats_min, tc.num_sats_max + 1, n).astype(np.int64)
     fix[: min(tc.no_fix_rows_start, n)] = 1
     if tc.no_fix_dropouts > 0 and n > 20:
-        drop = rng.choice(np.arange(10, n - 10), size=min(tc.no_fix_dropouts, n - 20), replace=False)
+        drop = rng.choice(
+            np.arange(10, n - 10), size=min(tc.no_fix_dropouts, n - 20), replace=False
+        )
         fix[drop] = 1
     sats = np.where(fix < 2, np.minimum(sats, 5), sats)
     t_us = np.int64(round(start_unix * 1e6)) + rel_us
@@ -220,7 +225,9 @@ def _radar_out(
     return tuple(out)
 
 
-def _rf_out(attempts: list[SimRfAttempt], site: Site, cfg: TwinConfig, start_unix: float) -> tuple[RfAttemptOut, ...]:
+def _rf_out(
+    attempts: list[SimRfAttempt], site: Site, cfg: TwinConfig, start_unix: float
+) -> tuple[RfAttemptOut, ...]:
     out: list[RfAttemptOut] = []
     for a in attempts:
         t_unix = round(start_unix + a.t, 3)

@@ -94,7 +94,9 @@ def _polar(rel: FloatArray) -> tuple[float, float, float]:
 
 def _from_polar(r: float, az_deg: float, el_deg: float) -> FloatArray:
     az, el = math.radians(az_deg), math.radians(el_deg)
-    return np.array([r * math.cos(el) * math.sin(az), r * math.cos(el) * math.cos(az), r * math.sin(el)])
+    return np.array(
+        [r * math.cos(el) * math.sin(az), r * math.cos(el) * math.cos(az), r * math.sin(el)]
+    )
 
 
 def _polar_cov(r: float, az_deg: float, el_deg: float, cfg: RadarModel) -> FloatArray:
@@ -228,6 +230,9 @@ def simulate_radar(
                 S = H @ best.P @ H.T + R
                 K = best.P @ H.T @ np.linalg.inv(S)
                 best.x = best.x + K @ (det - H @ best.x)
+                speed = float(np.linalg.norm(best.x[3:6]))
+                if speed > cfg.tracker_max_speed_mps:
+                    best.x[3:6] *= cfg.tracker_max_speed_mps / speed
                 best.P = (np.eye(6) - K @ H) @ best.P
                 best.last_update = t
                 best.hits.append(True)
@@ -241,9 +246,7 @@ def simulate_radar(
             P0[0:3, 0:3] = R
             P0[3:6, 3:6] = np.eye(3) * 15.0**2
             x0 = np.concatenate([det, np.zeros(3)])
-            tracks.append(
-                _Track(next_id, x0, P0, t, t, t, [True], False, 10.0 * math.log10(rcs))
-            )
+            tracks.append(_Track(next_id, x0, P0, t, t, t, [True], False, 10.0 * math.log10(rcs)))
             next_id += 1
         keep: list[_Track] = []
         for tr in tracks:
@@ -305,7 +308,9 @@ def simulate_radar(
                 if kind == BIRD:
                     hd = float(rng.uniform(0, 2 * math.pi))
                     sp = max(1.0, float(rng.normal(cfg.bird_speed_mps, 2.0)))
-                    vel0 = np.array([sp * math.sin(hd), sp * math.cos(hd), float(rng.normal(0, 0.5))])
+                    vel0 = np.array(
+                        [sp * math.sin(hd), sp * math.cos(hd), float(rng.normal(0, 0.5))]
+                    )
                     uav_p = float(rng.uniform(0.03, 0.3))
                     rcs_o = float(rng.normal(-22.0, 4.0))
                 else:
@@ -314,7 +319,9 @@ def simulate_radar(
                     uav_p = float(rng.uniform(0.01, 0.12))
                     rcs_o = float(rng.normal(-5.0, 6.0))
                 objects.append(
-                    _Object(next_id, kind, pos0, vel0, t + float(rng.exponential(life)), uav_p, rcs_o)
+                    _Object(
+                        next_id, kind, pos0, vel0, t + float(rng.exponential(life)), uav_p, rcs_o
+                    )
                 )
                 next_id += 1
         alive: list[_Object] = []

@@ -53,7 +53,11 @@ class SimRfAttempt:
 
 
 def grid_start(
-    sensors: FloatArray, toa_m: FloatArray, height: float, margin_m: float = 2500.0, step_m: float = 50.0
+    sensors: FloatArray,
+    toa_m: FloatArray,
+    height: float,
+    margin_m: float = 2500.0,
+    step_m: float = 50.0,
 ) -> FloatArray:
     """Best point of a coarse grid over the sensors' box (plus ``margin_m``) for the TDOAs."""
     lo = sensors[:, :2].min(axis=0) - margin_m
@@ -122,7 +126,7 @@ def solve_tdoa_2d(
     converged = bool(sol.status > 0) or step < converge_m
     J = jac(x)
     try:
-        cov = np.linalg.inv(J.T @ J)
+        cov = np.asarray(np.linalg.inv(J.T @ J), dtype=float)
     except np.linalg.LinAlgError:
         cov = np.full((2, 2), np.inf)
     rms = float(np.sqrt(np.mean(sol.fun**2))) if sol.fun.size else 0.0
@@ -179,7 +183,11 @@ def simulate_rf(
         else:
             order = idx[np.argsort(-snr[idx])]
             xy, conv, cov, rms = solve_tdoa_2d(
-                S[order], toa[order], height, cfg.max_iterations, cfg.converge_m,
+                S[order],
+                toa[order],
+                height,
+                cfg.max_iterations,
+                cfg.converge_m,
                 margin_m=cfg.search_margin_m,
             )
             far = float(np.min(np.linalg.norm(S[:, :2] - xy, axis=1)))

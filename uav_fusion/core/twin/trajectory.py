@@ -248,10 +248,8 @@ def fly(
                     if duration_s is None:
                         t_end = t + tail_s
         elif wi >= len(targets):
-            if landing or not airborne:
-                v = [0.0, 0.0, 0.0]
-            else:  # hover at the last waypoint
-                v = [0.9 * v[0], 0.9 * v[1], 0.9 * v[2]]
+            # on the ground after landing, or hovering at the last waypoint
+            v = [0.0, 0.0, 0.0] if landing or not airborne else [0.9 * x for x in v]
         if airborne:
             gust = [
                 g_a * gust[0] + g_b * float(rng.standard_normal()),

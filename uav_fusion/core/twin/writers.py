@@ -178,8 +178,12 @@ def write_truth(twin: TwinFlight, path: Path) -> None:
                     lon,
                     lat,
                     alt,
-                    _tuple(round(float(att[0]), 4), round(float(att[1]), 4), round(float(att[2]), 4)),
-                    _tuple(round(float(vel[0]), 3), round(float(vel[1]), 3), round(float(vel[2]), 3)),
+                    _tuple(
+                        round(float(att[0]), 4), round(float(att[1]), 4), round(float(att[2]), 4)
+                    ),
+                    _tuple(
+                        round(float(vel[0]), 3), round(float(vel[1]), 3), round(float(vel[2]), 3)
+                    ),
                     f"{tl.battery_v[i]:.3f}",
                     _stamp(int(tl.t_us[i]) + offset_us),
                     int(tl.fix_type[i]),

@@ -1,0 +1,67 @@
+"""``uav_fusion calibrate``: raw radar and RF errors of a flight against its truth."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from uav_fusion.core.calibration import calibrate, format_calibration
+from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.site import load_site
+from uav_fusion.core.twin.writers import MANIFEST
+from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+
+HELP = "print each sensor's raw ('before fusion') error statistics against truth"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "folder", nargs="?", help="flight folder (default: the bundled default flight)"
+    )
+    parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
+    parser.add_argument(
+        "--rf-file", default="AADM.csv", help="RF CSV name inside the folder (default: AADM.csv)"
+    )
+    parser.add_argument(
+        "--uav-prob",
+        type=float,
+        default=0.5,
+        help="a radar track is the UAV's when its mean catProb[0] is at least this (0.5)",
+    )
+    parser.add_argument("--strict", action="store_true", help="stop at the first bad row")
+
+
+def radar_position(
+    folder: Path, default: tuple[float, float, float], site_path: str | None
+) -> tuple[float, float, float]:
+    """The radar position: from a twin manifest in the folder if there is one, else the site's."""
+    man = folder / MANIFEST
+    if not man.is_file():
+        return default
+    try:
+        doc = json.loads(man.read_text(encoding="utf-8"))
+        r = doc["radar"]
+        lat, lon, h = float(r["lat"]), float(r["lon"]), float(r["h"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"{man}: unreadable twin manifest: {exc}") from None
+    site = load_site(site_path)
+    e, n, u = site.to_enu(lat, lon, h)
+    return float(e), float(n), float(u)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not 0.0 <= args.uav_prob <= 1.0:
+        raise ConfigError(f"--uav-prob must lie in [0, 1], got {args.uav_prob}")
+    folder = Path(args.folder) if args.folder else data_path(DEFAULT_FLIGHT)
+    site = load_site(args.site)
+    flight = load_flight(folder, site, rf_file=args.rf_file, strict=args.strict)
+    radar = radar_position(folder, site.radar.enu, args.site)
+    res = calibrate(flight, radar, site.radar.range_gate_m, args.uav_prob)
+    print(format_calibration(res))
+    for key in ("truth", "radar", "rf"):
+        rep = flight.reports.get(key)
+        if rep is not None and (rep.n_skipped or rep.notes):
+            print(f"Load {key}: {rep.summary()}")
+    return 0
