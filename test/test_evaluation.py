@@ -6,6 +6,7 @@ import json
 import math
 import random
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -409,3 +410,34 @@ def test_offline_evaluation_counts_agree_with_the_estimator() -> None:
     assert ev_uav.radar_reports == all_reports - 5
     assert "0.5" in info_uav["raw radar row"]
     assert ev_uav.row("kf_all").stats.count == counts["all_steps"]
+
+
+def test_evaluate_command_prints_the_table_and_writes_the_report(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from test_graph_flight import write_flight
+
+    from uav_fusion.cli import main
+
+    folder = write_flight(tmp_path / "flight", seconds=20.0)
+    out = tmp_path / "report"
+    rc = main(["evaluate", str(folder), "--out", str(out), "--no-figures", "--tolerance", "2"])
+    printed = capsys.readouterr().out
+    assert rc == 0
+    assert "KF fused track, all steps (3D)" in printed
+    assert f"report: {out / 'report.md'}" in printed
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["time_coverage_tolerance_s"] == 2.0
+    assert doc["info"]["profile"] == "paper"
+    assert doc["steps"] > 0 and doc["rf_attempts"] > 0
+    assert not list(out.glob("*.png"))
+
+
+def test_evaluate_command_reports_a_missing_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from uav_fusion.cli import main
+
+    rc = main(["evaluate", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
+    assert rc == 2
+    assert "flight folder not found" in capsys.readouterr().err
