@@ -227,7 +227,7 @@ def figure_error_cdf(ev: Evaluation, path: Path) -> Path | None:
     ax.set_ylim(0, 1.02)
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title("Position error CDFs: RF, radar and KF fusion")
-    ax.legend(loc="lower right", fontsize=7.5)
+    ax.legend(loc="upper left", fontsize=7.5)  # CDFs leave that corner empty
     return _save(fig, path)
 
 
