@@ -197,7 +197,7 @@ def _row_legend(ev: Evaluation, key: str) -> str:
     r = ev.row(key)
     return (
         f"{r.spec.label}: n={r.stats.count}, cov {_fmt(r.stats.coverage_pct)} % "
-        f"(time {_fmt(r.time_coverage_pct)} %)"
+        f"(time, ≤ {ev.tolerance_s:g} s: {_fmt(r.time_coverage_pct)} %)"
     )
 
 
@@ -209,7 +209,7 @@ def figure_error_cdf(ev: Evaluation, path: Path) -> Path | None:
         "radar_validated": ("tab:blue", "-"),
         "kf_all": ("black", "-"),
     }
-    fig, ax = _new_figure((9.0, 5.5))
+    fig, ax = _new_figure((9.0, 7.0))
     drawn = 0
     for key, (color, ls) in styles.items():
         e = np.sort(_finite_err(ev, key))
@@ -227,7 +227,8 @@ def figure_error_cdf(ev: Evaluation, path: Path) -> Path | None:
     ax.set_ylim(0, 1.02)
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title("Position error CDFs: RF, radar and KF fusion")
-    ax.legend(loc="upper left", fontsize=7.5)  # CDFs leave that corner empty
+    # below the axes: long labels would hide curves anywhere inside
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8, frameon=False)
     return _save(fig, path)
 
 
