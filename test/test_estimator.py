@@ -246,7 +246,12 @@ def test_divergence_recovers_within_the_rejection_limit(site: Site) -> None:
     """Started on a 3 km RF outlier, the track locks onto garbage; after N consecutive
     rejections it restarts from a good measurement and then follows the truth."""
     n_max = 6
-    prof = _profile(max_consecutive_rejections=n_max, init_velocity_std_mps=2.0)
+    prof = _profile(
+        max_consecutive_rejections=n_max,
+        max_coast_s=None,
+        tentative_sources=(),
+        init_velocity_std_mps=2.0,
+    )
     s = simulate_stream(11, 60.0, (2.0, 2.0, 2.0), R3, R2, velocity_std=5.0)
     ms = [rf(s.measurements[0].t - 0.5, (3000.0, 2500.0), -1), *s.measurements]
     truth = np.vstack([s.truth[0], s.truth])
@@ -268,8 +273,27 @@ def test_divergence_recovers_within_the_rejection_limit(site: Site) -> None:
     assert later[20:].max() < 60.0
     assert est.counters["reinitialisations"] == 1
     # without the limit the filter never recovers
-    stuck = run_stream(FusionEstimator(_profile(init_velocity_std_mps=2.0), site), ms)
+    literal = prof.with_changes(max_consecutive_rejections=None)
+    stuck = run_stream(FusionEstimator(literal, site), ms)
     assert sum(st.updated for st in stuck) < 10
+
+
+def test_tentative_rf_track_restarts_on_first_rejection(site: Site) -> None:
+    prof = _profile(tentative_sources=(RF,), max_consecutive_rejections=None, max_coast_s=None)
+    est = FusionEstimator(prof, site)
+    assert est.process(rf(0.0, (3000.0, 2500.0), 0))[0].status == "initialised"
+    assert est.tentative
+    s = est.process(radar(1.0, (300.0, -200.0, 50.0), 1))[0]
+    assert (s.status, s.reason) == ("reset", "tentative")
+    np.testing.assert_array_equal(s.x[:3], [300.0, -200.0, 50.0])
+    assert not est.tentative  # started from radar: confirmed at once
+    # an RF-started track confirmed by an accepted fix no longer restarts on one rejection
+    est2 = FusionEstimator(prof, site)
+    est2.process(rf(0.0, (100.0, 100.0), 0))
+    assert est2.process(rf(3.9, (110.0, 95.0), 1))[0].status == "updated"
+    assert not est2.tentative
+    assert est2.process(rf(7.8, (2000.0, 95.0), 2))[0].status == "coasted"
+    assert "reset_tentative" not in est2.counters
 
 
 def test_max_coast_restarts_the_track(site: Site) -> None:
@@ -408,6 +432,16 @@ def test_missing_and_broken_profile(tmp_path: Path) -> None:
 
 
 # --- R estimation ------------------------------------------------------------------------------
+def test_q_from_truth_recovers_the_simulated_density(site: Site) -> None:
+    from uav_fusion.core.estimator.noise import estimate_q_from_truth
+
+    q = (3.0, 1.0, 0.2)
+    s = simulate_stream(4, 4000.0, q, R3, R2, radar_period_s=0.5, jitter=0.0)
+    fl = stream_to_flight(s, site, truth_period_s=0.5)
+    est = estimate_q_from_truth(fl, horizon_s=4.0)
+    np.testing.assert_allclose(est, q, rtol=0.12)
+
+
 def test_sample_cov_is_matlab_cov() -> None:
     e = np.array([[1.0, 2.0], [3.0, 1.0], [0.0, 5.0], [2.0, 2.0]])
     mu = e.mean(axis=0)

@@ -56,6 +56,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--range-gate", type=float, help="radar range gate in m (default: the site's)"
     )
     parser.add_argument(
+        "--q-horizon",
+        type=float,
+        default=4.0,
+        metavar="S",
+        help="horizon of the truth velocity increments behind the suggested q (default: 4 s)",
+    )
+    parser.add_argument(
         "--write-profile",
         metavar="YAML",
         help="write the two R matrices into this profile file (other keys are kept)",
@@ -107,7 +114,7 @@ def _replace_measurement_block(text: str, meas: dict[str, object]) -> str | None
 
 def run(args: argparse.Namespace) -> int:
     from uav_fusion.core.dataset import load_flight
-    from uav_fusion.core.estimator.noise import estimate_r
+    from uav_fusion.core.estimator.noise import estimate_q_from_truth, estimate_r
 
     site = load_site(args.site)
     folder = Path(args.folder) if args.folder else data_path(DEFAULT_FLIGHT)
@@ -128,6 +135,12 @@ def run(args: argparse.Namespace) -> int:
         print(est.describe())
         print(f"  R_{est.source} (m^2) =")
         print(_fmt(est.R))
+    q = estimate_q_from_truth(flight, args.q_horizon)
+    print(
+        f"truth velocity increments over ~{args.q_horizon:g} s suggest q = "
+        + ", ".join(f"{v:.3g}" for v in q)
+        + " m^2/s^3 (east, north, up); not written into the profile"
+    )
     if args.write_profile:
         date = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d")
         note = (

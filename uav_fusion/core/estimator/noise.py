@@ -176,3 +176,25 @@ def estimate_r(
         _estimate("radar", rad, radar_method, radar_select, trim_probability, flight),
         _estimate("rf", rf, rf_method, "ok fixes", trim_probability, flight),
     )
+
+
+def estimate_q_from_truth(flight: Flight, horizon_s: float = 4.0) -> FloatArray:
+    """Per-axis white-acceleration spectral density suggested by the truth's velocities.
+
+    Under the continuous white-noise acceleration model a velocity increment over ``dt`` has
+    variance ``q~ dt``; this returns ``mean(dv^2) / mean(dt)`` per ENU axis for increments over
+    about ``horizon_s`` (real manoeuvres are not white, so the value depends on the horizon:
+    use the typical interval between accepted measurements). Truth velocity is NED.
+    """
+    fixes = sorted(flight.truth, key=lambda f: f.t)
+    if len(fixes) < 3:
+        where = flight.folder if flight.folder is not None else flight.name
+        raise DataError(where, None, "too few truth samples to estimate q")
+    t = np.array([f.t for f in fixes])
+    ned = np.array([f.vel_ned for f in fixes], dtype=float)
+    v = np.column_stack([ned[:, 1], ned[:, 0], -ned[:, 2]])
+    step = max(1, round(horizon_s / float(np.median(np.diff(t)))))
+    dt = t[step:] - t[:-step]
+    dv = v[step:] - v[:-step]
+    ok = np.all(np.isfinite(dv), axis=1) & (dt > 0)
+    return np.asarray(np.mean(dv[ok] ** 2, axis=0) / np.mean(dt[ok]), dtype=float)

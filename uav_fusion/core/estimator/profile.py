@@ -45,6 +45,8 @@ class Profile:
     rf_init_altitude_std_m: float = 40.0
     max_consecutive_rejections: int | None = None
     max_coast_s: float | None = None
+    tentative_sources: tuple[str, ...] = ()
+    tentative_max_rejections: int = 1
     description: str = ""
     r_note: str = ""
     source: Path | None = field(default=None, compare=False)
@@ -80,6 +82,8 @@ class Profile:
                 "rf_init_altitude_std_m": self.rf_init_altitude_std_m,
                 "max_consecutive_rejections": self.max_consecutive_rejections,
                 "max_coast_s": self.max_coast_s,
+                "tentative_sources": list(self.tentative_sources),
+                "tentative_max_rejections": self.tentative_max_rejections,
             },
         }
 
@@ -142,9 +146,12 @@ def _validate(p: Profile, where: str) -> None:
             f"{where}: radar_selection must be one of {', '.join(SELECTIONS)}, "
             f"got {p.radar_selection!r}"
         )
-    for src in p.init_sources:
-        if src not in SOURCES:
-            raise ConfigError(f"{where}: track.init_sources: unknown source {src!r}")
+    for key, srcs in (("init_sources", p.init_sources), ("tentative_sources", p.tentative_sources)):
+        for src in srcs:
+            if src not in SOURCES:
+                raise ConfigError(f"{where}: track.{key}: unknown source {src!r}")
+    if p.tentative_max_rejections < 1:
+        raise ConfigError(f"{where}: track.tentative_max_rejections must be >= 1")
     if not p.init_velocity_std_mps > 0 or not p.rf_init_altitude_std_m > 0:
         raise ConfigError(f"{where}: track initial standard deviations must be > 0")
     max_rej = p.max_consecutive_rejections
@@ -180,8 +187,12 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     sources = _section(doc, "sources", where)
     track = _section(doc, "track", where)
     init_sources = track.get("init_sources", [RADAR, RF])
-    if not isinstance(init_sources, list):
-        raise ConfigError(f"{where}: track.init_sources must be a list")
+    tentative = track.get("tentative_sources", []) or []
+    if not isinstance(init_sources, list) or not isinstance(tentative, list):
+        raise ConfigError(f"{where}: track.init_sources / tentative_sources must be lists")
+    tent_max = track.get("tentative_max_rejections", 1)
+    if not isinstance(tent_max, int) or isinstance(tent_max, bool):
+        raise ConfigError(f"{where}: track.tentative_max_rejections must be an integer")
     max_rej = track.get("max_consecutive_rejections")
     if max_rej is not None and (not isinstance(max_rej, int) or isinstance(max_rej, bool)):
         raise ConfigError(f"{where}: track.max_consecutive_rejections must be an integer or null")
@@ -203,6 +214,8 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         rf_init_altitude_std_m=_float(track, "rf_init_altitude_std_m", f"{where}: track", 40.0),
         max_consecutive_rejections=max_rej,
         max_coast_s=_opt_float(track, "max_coast_s", f"{where}: track", None),
+        tentative_sources=tuple(str(x) for x in tentative),
+        tentative_max_rejections=tent_max,
         description=str(doc.get("description", "") or ""),
         r_note=str(meas.get("note", "") or ""),
         source=source,

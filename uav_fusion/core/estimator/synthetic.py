@@ -120,29 +120,23 @@ def stream_to_flight(
     ms = stream.measurements
     ts = np.array([m.t for m in ms])
     grid = np.arange(ts[0], ts[-1], truth_period_s)
-    tr = np.column_stack([np.interp(grid, ts, stream.truth[:, i]) for i in range(3)])
+    tr = np.column_stack([np.interp(grid, ts, stream.truth[:, i]) for i in range(6)])
     lat, lon, h = site.to_geodetic(tr[:, 0], tr[:, 1], tr[:, 2])
-    truth = [
-        TruthFix(
-            float(t),
-            float(a),
-            float(o),
-            float(hh),
-            float(e),
-            float(n),
-            float(u),
-            (0.0, 0.0, 0.0),
-            4,
-            20,
-        )
-        for t, a, o, hh, (e, n, u) in zip(grid, lat, lon, h, tr, strict=True)
-    ]
+    truth: list[TruthFix] = []
+    for t, a, o, hh, r in zip(grid, lat, lon, h, tr, strict=True):
+        vel_ned = (float(r[4]), float(r[3]), -float(r[5]))
+        e, n, u = float(r[0]), float(r[1]), float(r[2])
+        fix = TruthFix(float(t), float(a), float(o), float(hh), e, n, u, vel_ned, 4, 20)
+        truth.append(fix)
     frames: dict[float, list[RadarTrack]] = {}
     rf: list[RfAttempt] = []
-    for m in ms:
+    # geodetic coordinates of every measurement in one vectorised call
+    zs = np.array([(*m.z[:2], m.z[2] if m.dim == 3 else 0.0) for m in ms], dtype=float)
+    glat, glon, gh = site.to_geodetic(zs[:, 0], zs[:, 1], zs[:, 2])
+    for k, m in enumerate(ms):
+        la, lo, hh = float(glat[k]), float(glon[k]), float(gh[k])
+        e, n, u = (float(v) for v in zs[k])
         if m.source == RADAR:
-            e, n, u = (float(v) for v in m.z)
-            la, lo, hh = (float(v) for v in site.to_geodetic(e, n, u))
             frames.setdefault(m.t, []).append(
                 RadarTrack(m.t, 1, la, lo, hh, e, n, u, None, 0.9, None, None)
             )
@@ -151,8 +145,6 @@ def stream_to_flight(
             if failed_rf_every and i % failed_rf_every == failed_rf_every - 1:
                 rf.append(RfAttempt(m.t, i, False, 0.0, 0.0, np.nan, np.nan, None, None, None))
             else:
-                e, n = (float(v) for v in m.z)
-                la, lo, _ = (float(v) for v in site.to_geodetic(e, n, 0.0))
                 rf.append(RfAttempt(m.t, i, True, la, lo, e, n, None, 4, 4))
     for trk in extra_tracks or []:
         frames.setdefault(trk.t, []).append(trk)

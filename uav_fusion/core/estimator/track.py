@@ -12,7 +12,9 @@ For each measurement, in the order given (callers sort by time, then ``seq``):
 5. NIS gate at the profile's chi-square probability for the measurement's dimension:
    accepted -> Joseph-form update; rejected -> coast (the prediction is the estimate);
 6. after ``max_consecutive_rejections`` NIS rejections in a row the track is restarted from
-   the measurement that hit the limit.
+   the measurement that hit the limit. A track started from a source listed in
+   ``tentative_sources`` (RF fixes, whose errors are heavy-tailed) is tentative until its
+   first accepted update and restarts after ``tentative_max_rejections`` rejections.
 
 Every measurement yields exactly one :class:`Step`. Statuses:
 
@@ -165,6 +167,9 @@ class FusionEstimator:
         self._init_sources = frozenset(profile.init_sources)
         self._max_rej = profile.max_consecutive_rejections
         self._max_coast = profile.max_coast_s
+        self._tentative_sources = frozenset(profile.tentative_sources)
+        self._tentative_max = profile.tentative_max_rejections
+        self.tentative = False  # track started from a tentative source, not yet confirmed
         self.t: float | None = None  # time of the current estimate
         self.active = False
         self.last_used_t: float | None = None
@@ -344,6 +349,7 @@ class FusionEstimator:
         c[key] = c.get(key, 0) + 1
         self.consecutive_rejections = 0
         self.last_used_t = m.t
+        self.tentative = False
         kf = self._kf
         return Step(
             m.t,
@@ -363,9 +369,9 @@ class FusionEstimator:
         self._count(f"coasted_{m.source}")
         self._count("rejected_nis")
         self.consecutive_rejections += 1
-        n = self._max_rej
+        n = self._tentative_max if self.tentative else self._max_rej
         if n is not None and self.consecutive_rejections >= n:
-            self.reset("max_rejections")
+            self.reset("tentative" if self.tentative else "max_rejections")
             if m.source in self._init_sources:
                 return self._initialise(m, nis)
         return self._snapshot(m, COASTED, "nis", nis)
@@ -388,6 +394,7 @@ class FusionEstimator:
             P[2, 2] = p.rf_init_altitude_std_m**2
         self._kf.set_state(x, P)
         self.active = True
+        self.tentative = m.source in self._tentative_sources
         self.t = m.t
         self.last_used_t = m.t
         self.consecutive_rejections = 0
