@@ -274,6 +274,11 @@ def fly(
     pos = np.asarray(ps, dtype=float)
     vel = np.asarray(vs, dtype=float)
     acc = np.gradient(vel, tt, axis=0) if tt.size > 1 else np.zeros_like(vel)
+    # the airframe's tilt follows the acceleration smoothed over ~0.5 s, not each gust step
+    width = max(1, round(0.5 / dt))
+    if tt.size > width:
+        kernel = np.ones(width) / width
+        acc = np.stack([np.convolve(acc[:, k], kernel, mode="same") for k in range(3)], axis=1)
     if math.isnan(t_landed):
         t_landed = float(tt[-1])
     if math.isnan(t_takeoff):

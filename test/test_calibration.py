@@ -1,0 +1,126 @@
+"""Calibration: the bundled default flight lands on the paper's raw rows (acceptance), and the
+statistics are computed as documented."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from uav_fusion.cli import main as cli_main
+from uav_fusion.core.calibration import calibrate, format_calibration, uav_track_ids
+from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
+from uav_fusion.core.site import load_site
+from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+
+
+@pytest.fixture(scope="module")
+def default_result():  # type: ignore[no-untyped-def]
+    site = load_site()
+    flight = load_flight(data_path(DEFAULT_FLIGHT), site, strict=True)
+    return calibrate(flight, site.radar.enu, site.radar.range_gate_m)
+
+
+def test_default_flight_meets_the_calibration_targets(default_result) -> None:  # type: ignore[no-untyped-def]
+    r = default_result
+    # radar: UAV reports at ~0.25 s, raw 3D error like the paper's, worse beyond the gate
+    assert 2900 <= r.radar_uav_reports <= 3300
+    assert r.radar_interval_median_s == pytest.approx(0.25, abs=0.01)
+    assert 18.0 <= r.radar.mean <= 35.0
+    assert 120.0 <= r.radar.max <= 350.0
+    assert r.radar_beyond_gate.mean > 1.5 * r.radar_in_gate.mean
+    assert r.radar_beyond_gate.count > 300 and r.radar_in_gate.count > 1000
+    assert r.radar_other_tracks > 0  # birds and clutter are present and told apart
+    rcs_min, rcs_mean, rcs_max = r.radar_rcs_m2
+    assert rcs_min >= 0.006 and rcs_max <= 0.56 and 0.09 <= rcs_mean <= 0.15
+    # RF: ~216 attempts at ~3.88 s, 90-98 % fixes, heavy-tailed errors
+    assert 205 <= r.rf_attempts <= 227
+    assert r.rf_interval_mean_s == pytest.approx(3.88, abs=0.1)
+    assert 90.0 <= r.rf.coverage_pct <= 98.0
+    assert r.rf.min < 15.0
+    assert 250.0 <= r.rf.mean <= 800.0
+    assert r.rf.max > 2000.0
+    # RF better in the northern half (split at the median truth north coordinate)
+    assert r.rf_north.mean < r.rf_south.mean
+    assert r.rf_north_median_m < r.rf_south_median_m
+    assert r.rf_north.count + r.rf_south.count == r.rf.count
+
+
+def test_error_grows_with_distance_from_the_radar(default_result) -> None:  # type: ignore[no-untyped-def]
+    means = [b.stats.mean for b in default_result.radar_bins if b.stats.count > 50]
+    assert means[0] < means[-1]
+    assert means[-1] > 2 * means[0]
+
+
+def _truth(n: int = 101) -> list[TruthFix]:
+    return [
+        TruthFix(t=100.0 + i, lat=0, lon=0, h=0, e=float(i), n=10.0 * i, u=50.0,
+                 vel_ned=(10.0, 1.0, 0.0), fix_type=6, num_sats=15)
+        for i in range(n)
+    ]  # fmt: skip
+
+
+def _track(t: float, tid: int, e: float, n: float, u: float, p: float | None) -> RadarTrack:
+    return RadarTrack(t=t, track_id=tid, lat=0, lon=0, h=0, e=e, n=n, u=u, vel_ned=None,
+                      uav_prob=p, range_m=None, rcs_dbsm=-10.0)  # fmt: skip
+
+
+def test_statistics_on_a_hand_made_flight() -> None:
+    truth = _truth()
+    # UAV track 1: 3 m east of truth at t = 110.5 (truth there: e 10.5, n 105, u 50)
+    # UAV track 2: 4 m up; bird track 3 (mean catProb 0.2) far off, never scored
+    frames = [
+        RadarFrame(110.5, (_track(110.5, 1, 13.5, 105.0, 50.0, 0.9),
+                           _track(110.5, 3, 900.0, 0.0, 10.0, 0.2))),
+        RadarFrame(120.0, (_track(120.0, 2, 20.0, 200.0, 54.0, 0.6),)),
+        RadarFrame(121.0, (_track(121.0, 1, 21.0, 210.0, 50.0, 0.4),
+                           _track(121.0, 3, 900.0, 0.0, 10.0, 0.2))),
+    ]  # fmt: skip
+    rf = [
+        RfAttempt(t=150.0, meas_id=1, ok=True, lat=1, lon=1, e=50.0 + 30.0, n=500.0 + 40.0,
+                  cep=None, valid_sensors=4, total_sensors=4),
+        RfAttempt(t=154.0, meas_id=2, ok=False, lat=0, lon=0, e=math.nan, n=math.nan,
+                  cep=None, valid_sensors=2, total_sensors=4),
+        RfAttempt(t=158.0, meas_id=3, ok=True, lat=1, lon=1, e=58.0, n=580.0 + 6.0,
+                  cep=None, valid_sensors=4, total_sensors=4),
+        RfAttempt(t=500.0, meas_id=4, ok=True, lat=1, lon=1, e=0.0, n=0.0,
+                  cep=None, valid_sensors=4, total_sensors=4),  # after the truth ends
+    ]  # fmt: skip
+    flight = Flight("hand", truth, frames, rf)
+    uav, other = uav_track_ids(flight, 0.5)
+    assert uav == {1, 2} and other == {3}  # track 1's mean is (0.9 + 0.4) / 2 = 0.65
+
+    res = calibrate(flight, (0.0, 0.0, 50.0), range_gate_m=150.0, range_bins=(0.0, 150.0))
+    assert res.radar_uav_reports == 3 and res.radar_other_reports == 2
+    assert res.radar.count == 3
+    assert res.radar.min == pytest.approx(0.0, abs=1e-9)
+    assert res.radar.max == pytest.approx(4.0)
+    assert res.radar.mean == pytest.approx(7.0 / 3.0)
+    # distances from the radar at (0, 0, 50): 105.5 m, 201.0 m, 211.0 m
+    assert res.radar_in_gate.count == 1 and res.radar_beyond_gate.count == 2
+    assert [b.stats.count for b in res.radar_bins] == [1, 2]
+    # RF: 4 attempts, 3 fixes, one without truth -> 2 scored errors of 50 m and 6 m
+    assert res.rf_attempts == 4 and res.rf_fixes == 3
+    assert res.rf.count == 2
+    assert res.rf.coverage_pct == pytest.approx(50.0)
+    assert sorted([res.rf.min, res.rf.max]) == pytest.approx([6.0, 50.0])
+    # split at the median truth north of the attempts with truth (500, 540, 580 -> 540)
+    assert res.rf_split_north_m == pytest.approx(540.0)
+    assert res.rf_north.count == 1 and res.rf_north.max == pytest.approx(6.0)
+    assert res.rf_south.count == 1 and res.rf_south.max == pytest.approx(50.0)
+    text = format_calibration(res)
+    assert "| Radar raw (3D) | 3 |" in text and "| RF raw (2D) | 2 |" in text
+
+
+def test_calibrate_command_prints_the_tables(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli_main(["calibrate"]) == 0
+    out = capsys.readouterr().out
+    assert "| RF raw (2D) |" in out and "| Radar raw (3D) |" in out
+    assert "| beyond 800 m |" in out and "| north (N >= split) |" in out
+    assert "median truth north coordinate" in out
+
+
+def test_calibrate_command_rejects_a_missing_folder(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    assert cli_main(["calibrate", str(tmp_path / "nowhere")]) == 2
+    assert "nowhere" in capsys.readouterr().err
