@@ -293,7 +293,7 @@ def test_tentative_rf_track_restarts_on_first_rejection(site: Site) -> None:
     assert est2.process(rf(3.9, (110.0, 95.0), 1))[0].status == "updated"
     assert not est2.tentative
     assert est2.process(rf(7.8, (2000.0, 95.0), 2))[0].status == "coasted"
-    assert "reset_tentative" not in est2.counters
+    assert "reinit_tentative" not in est2.counters
 
 
 def test_max_coast_restarts_the_track(site: Site) -> None:
@@ -303,7 +303,7 @@ def test_max_coast_restarts_the_track(site: Site) -> None:
     s = est.process(radar(6.0, (900.0, -200.0, 50.0), 2))[0]
     assert (s.status, s.reason) == ("reset", "max_coast")
     np.testing.assert_array_equal(s.x[:3], [900.0, -200.0, 50.0])
-    assert est.counters["reset_max_coast"] == 1
+    assert est.counters["reinit_max_coast"] == 1
 
 
 def test_external_reset(site: Site) -> None:
@@ -315,7 +315,7 @@ def test_external_reset(site: Site) -> None:
     assert est.state() is None
     s = est.process(radar(1.0, (0.0, 0.0, 50.0), 1))[0]
     assert (s.status, s.reason) == ("reset", "operator")
-    assert est.counters["reset_operator"] == 1
+    assert est.counters["reinit_operator"] == 1
 
 
 # --- flights: selection, stream, runner ----------------------------------------------------

@@ -88,9 +88,11 @@ def run(args: argparse.Namespace) -> int:
     rejected = {k[len("rejected_") :]: v for k, v in c.items() if k.startswith("rejected_")}
     if rejected:
         print("  rejected: " + ", ".join(f"{k}={v}" for k, v in sorted(rejected.items())))
+    reinit = {k[len("reinit_") :]: v for k, v in c.items() if k.startswith("reinit_")}
+    detail = ", ".join(f"{k}={v}" for k, v in sorted(reinit.items()))
     print(
         f"  track starts: {c.get('initialised', 0)} initial, "
-        f"{c.get('reinitialisations', 0)} re-initialisations"
+        f"{c.get('reinitialisations', 0)} re-initialisations" + (f" ({detail})" if detail else "")
     )
     rate = n / elapsed if elapsed > 0 else float("inf")
     print(f"  {n} measurements in {elapsed:.3f} s ({rate:.0f}/s)")

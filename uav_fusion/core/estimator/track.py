@@ -181,7 +181,7 @@ class FusionEstimator:
     def reset(self, reason: str) -> None:
         """Drop the track; the next usable measurement starts a new one (status ``reset``)."""
         if self.active:
-            self._count(f"reset_{reason}")
+            self._count(f"reinit_{reason}")
             self._count("reinitialisations")
             self._pending_reset = reason
         self.active = False
