@@ -364,7 +364,9 @@ def test_run_flight_counts_and_streaming_equivalence(site: Site, tmp_path: Path)
     pc = res.paper_counts()
     assert pc["all_steps"] == pc["updated_estimates"] + pc["coasted_estimates"]
     assert pc["all_steps"] + pc["discarded"] == len(res.steps)
-    assert pc["radar_accepted"] + pc["rf_accepted"] == pc["updated_estimates"]
+    assert pc["radar_accepted"] + pc["rf_accepted"] + pc["track_starts"] == pc["updated_estimates"]
+    assert pc["track_starts"] == sum(s.status in ("initialised", "reset") for s in res.steps) >= 1
+    assert all(s.validated == (s.status == "updated") for s in res.steps)
     assert res.counters["measurements"] == len(res.steps)
     # the streaming API fed by hand gives bit-identical output
     est = FusionEstimator(prof, site)

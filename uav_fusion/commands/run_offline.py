@@ -83,7 +83,10 @@ def run(args: argparse.Namespace) -> int:
         f"  steps: {pc['all_steps']} = {pc['updated_estimates']} updated "
         f"+ {pc['coasted_estimates']} coasted; {pc['discarded']} discarded"
     )
-    print(f"  accepted: radar {pc['radar_accepted']}, rf {pc['rf_accepted']}")
+    print(
+        f"  passed the NIS gate: radar {pc['radar_accepted']}, rf {pc['rf_accepted']}; "
+        f"track starts {pc['track_starts']}"
+    )
     c = result.counters
     rejected = {k[len("rejected_") :]: v for k, v in c.items() if k.startswith("rejected_")}
     if rejected:

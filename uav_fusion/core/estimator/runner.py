@@ -41,16 +41,19 @@ class RunResult:
 
         ``all_steps = updated_estimates + coasted_estimates`` (the paper: 2528 + 127 = 2655);
         discarded reports (range gate, class probability, not selected, ...) are not steps.
-        ``radar_accepted`` / ``rf_accepted`` are the "after validation" rows' counts.
+        ``radar_accepted`` / ``rf_accepted`` are the "after validation" rows' counts
+        (measurements that passed the NIS gate); ``track_starts`` are the updated estimates
+        that started a track from a measurement without a gate test.
         """
         upd = sum(1 for s in self.steps if s.updated)
         coast = sum(1 for s in self.steps if s.coasted)
-        radar_acc = sum(1 for s in self.steps if s.updated and s.source == RADAR)
-        rf_acc = sum(1 for s in self.steps if s.updated and s.source == RF)
+        radar_acc = sum(1 for s in self.steps if s.validated and s.source == RADAR)
+        rf_acc = sum(1 for s in self.steps if s.validated and s.source == RF)
         out = {
             "all_steps": upd + coast,
             "updated_estimates": upd,
             "coasted_estimates": coast,
+            "track_starts": upd - radar_acc - rf_acc,
             "radar_accepted": radar_acc,
             "rf_accepted": rf_acc,
             "discarded": sum(1 for s in self.steps if s.status == "discarded"),

@@ -128,6 +128,15 @@ class Step:
         return self.status in USED
 
     @property
+    def validated(self) -> bool:
+        """The measurement passed every gate (NIS included) and updated the track.
+
+        Unlike :attr:`updated` this excludes track starts, whose measurement was not tested
+        against a prediction: the paper's "after validation" rows count these.
+        """
+        return self.status == UPDATED
+
+    @property
     def coasted(self) -> bool:
         """The measurement failed the NIS gate; the estimate is the prediction."""
         return self.status == COASTED
