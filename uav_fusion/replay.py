@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rclpy.clock import Clock as RosClock
+from rclpy.clock_type import ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -89,6 +91,14 @@ def replay_params(publish_clock: bool) -> list[Param]:
             "wall seconds to wait for subscribers before the first message (0 = do not wait)",
             lo=0.0,
             hi=3600.0,
+        ),
+        Param(
+            "wait_for_clock_subscribers",
+            0,
+            "with publish_clock: also wait (same timeout) until /clock has this many "
+            "subscribers, e.g. the follower replays and the fusion node in other processes",
+            lo=0,
+            hi=1000,
         ),
         Param(
             "delay_s",
@@ -159,6 +169,7 @@ class ReplayDriver:
         span: tuple[float, float],
         batch_span_s: float = math.inf,
         follow_sim_time: bool = False,
+        clock_subscribers: int = 0,
         drained: Callable[[], bool] | None = None,
         on_done: Callable[[], None] | None = None,
     ) -> None:
@@ -170,6 +181,7 @@ class ReplayDriver:
         self.wait_s = float(wait_for_subscribers_s)
         self.t_start, self.t_end = span
         self.drained = drained
+        self.clock_subscribers = int(clock_subscribers)
         self.on_done = on_done
         self.events: list[ReplayEvent] = []
         self._publishers: list[Publisher] = []
@@ -178,6 +190,7 @@ class ReplayDriver:
         self._order = 0
         self._state = "idle"
         self._wall0 = 0.0
+        self._last_tick = 0.0
         self._wait_started = 0.0
         self._clock_t = -math.inf
         self.done = False
@@ -185,7 +198,10 @@ class ReplayDriver:
             node.create_publisher(Clock, "/clock", CLOCK_QOS) if publish_clock else None
         )
         self._period = float(clock_period_s)
-        self._timer = node.create_timer(self._period, self._tick)
+        # wall-clock (steady) timer: with use_sim_time a ROS-time timer would only tick once
+        # /clock runs, and a follower must be ready before that
+        steady = RosClock(clock_type=ClockType.STEADY_TIME)
+        self._timer = node.create_timer(self._period, self._tick, clock=steady)
 
     # --- set-up ---------------------------------------------------------------------------
     def add(
@@ -220,6 +236,11 @@ class ReplayDriver:
         return self.published.get(id(publisher), 0)
 
     def _subscribers_ready(self) -> bool:
+        if (
+            self.clock_pub is not None
+            and self.clock_pub.get_subscription_count() < self.clock_subscribers
+        ):
+            return False
         return all(p.get_subscription_count() > 0 for p in self._publishers)
 
     def _publish_clock(self, t: float) -> None:
@@ -260,7 +281,7 @@ class ReplayDriver:
                     "publishing anyway"
                 )
             self._state = "running"
-            self._wall0 = time.monotonic()
+            self._wall0 = self._last_tick = time.monotonic()
             self.node.get_logger().info(
                 f"replaying {len(self.events)} messages at rate {self.rate:g}"
                 + (" following /clock" if self.follow else "")
@@ -277,6 +298,20 @@ class ReplayDriver:
             limit = self.batch_size
             if self._next < len(self.events):
                 horizon = self.events[self._next].due + self.batch_span_s
+        elif self.drained is not None and not self.follow:
+            # paced, with consumers in this process: sensor time stands still while they
+            # catch up, and one tick never spans more than batch_span_s (after a stall)
+            now = time.monotonic()
+            if not self.drained():
+                self._wall0 += now - self._last_tick
+                self._last_tick = now
+                return
+            if self._next < len(self.events):
+                cap = max(self.events[self._next].due, self._clock_t) + self.batch_span_s
+                if horizon > cap:
+                    self._wall0 += (horizon - cap) / self.rate
+                    horizon = cap
+            self._last_tick = now
         n = 0
         while self._next < len(self.events) and n < limit:
             ev = self.events[self._next]
@@ -349,6 +384,7 @@ class ReplayNode(Node):
             span=flight_span(self.flight),
             batch_span_s=float(self.p["batch_span_s"]),
             follow_sim_time=self.use_sim_time(),
+            clock_subscribers=int(self.p["wait_for_clock_subscribers"]),
             on_done=self._on_done,
         )
         for pub, items in self.streams():
