@@ -412,6 +412,8 @@ def test_paper_profile() -> None:
         (lambda d: d["track"].update(init_sources=["sonar"]), "sonar"),
         (lambda d: d["track"].update(max_consecutive_rejections=0), "max_consecutive"),
         (lambda d: d["motion"].update(model="ca"), "not supported"),
+        (lambda d: d["track"].update(max_coast=30), "unknown key 'track.max_coast'"),
+        (lambda d: d.update(gate=0.9), "unknown key 'gate'"),
     ],
 )
 def test_profile_errors_name_file_and_key(tmp_path: Path, edit, message: str) -> None:  # type: ignore[no-untyped-def]

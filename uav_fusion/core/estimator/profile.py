@@ -88,6 +88,44 @@ class Profile:
         }
 
 
+_KEYS: dict[str, tuple[str, ...]] = {
+    "": (
+        "name",
+        "description",
+        "motion",
+        "measurement",
+        "gating",
+        "radar_selection",
+        "sources",
+        "track",
+    ),
+    "motion": ("model", "q"),
+    "measurement": ("radar", "rf", "note"),
+    "measurement.radar": ("R",),
+    "measurement.rf": ("R",),
+    "gating": ("range_gate_m", "nis_probability", "min_uav_prob"),
+    "sources": (RADAR, RF),
+    "track": (
+        "init_sources",
+        "init_velocity_std_mps",
+        "rf_init_altitude_m",
+        "rf_init_altitude_std_m",
+        "tentative_sources",
+        "tentative_max_rejections",
+        "max_consecutive_rejections",
+        "max_coast_s",
+    ),
+}
+
+
+def _check_keys(d: dict[str, Any], section: str, where: str) -> None:
+    allowed = _KEYS[section]
+    for k in d:
+        if k not in allowed:
+            at = f"{section}.{k}" if section else str(k)
+            raise ConfigError(f"{where}: unknown key '{at}' (allowed: {', '.join(allowed)})")
+
+
 def _section(doc: dict[str, Any], key: str, where: str) -> dict[str, Any]:
     v = doc.get(key, {})
     if v is None:
@@ -166,6 +204,7 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     where = str(source) if source else "<profile>"
     if not isinstance(doc, dict):
         raise ConfigError(f"{where}: expected a mapping at top level")
+    _check_keys(doc, "", where)
     motion = _section(doc, "motion", where)
     model = str(motion.get("model", "cv"))
     if model != "cv":
@@ -186,6 +225,16 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     gating = _section(doc, "gating", where)
     sources = _section(doc, "sources", where)
     track = _section(doc, "track", where)
+    for name, sec in (
+        ("motion", motion),
+        ("measurement", meas),
+        ("measurement.radar", radar),
+        ("measurement.rf", rf),
+        ("gating", gating),
+        ("sources", sources),
+        ("track", track),
+    ):
+        _check_keys(sec, name, where)
     init_sources = track.get("init_sources", [RADAR, RF])
     tentative = track.get("tentative_sources", []) or []
     if not isinstance(init_sources, list) or not isinstance(tentative, list):
