@@ -343,21 +343,29 @@ class _FlaggedStep:
     def coasted(self) -> bool:
         return self.status == "coasted"
 
+    @property
+    def validated(self) -> bool:
+        return self.status == "updated"
 
-def test_steps_are_classed_by_their_updated_and_coasted_flags() -> None:
+
+def test_steps_are_classed_by_their_updated_coasted_and_validated_flags() -> None:
     ev = Evaluator()
     straight_truth(ev, duration=10.0)
     p = np.array([*truth_at(T0 + 1.0), 0.0, 0.0, 0.0])
     steps = [
-        _FlaggedStep(T0 + 1.0, "radar", "initialised", p, 0, z=p[:3] + np.array([0.0, 2.0, 0.0])),
-        _FlaggedStep(T0 + 1.0, "radar", "coasted", p, 1),
-        _FlaggedStep(T0 + 1.0, "radar", "reset", p, 2),
+        _FlaggedStep(T0 + 1.0, "radar", "initialised", p, 0, z=p[:3] + np.array([0.0, 9.0, 0.0])),
+        _FlaggedStep(T0 + 1.0, "radar", "updated", p, 1, z=p[:3] + np.array([0.0, 2.0, 0.0])),
+        _FlaggedStep(T0 + 1.0, "radar", "coasted", p, 2),
+        _FlaggedStep(T0 + 1.0, "radar", "discarded", p, 3),
     ]
     feed_steps(ev, steps)
     res = ev.evaluate()
-    assert res.step_status == {"updated": 1, "coasted": 1, "reset": 1}
+    # a track start is an updated estimate, but its measurement was never gated: not validated
+    assert res.step_status == {"updated": 2, "coasted": 1, "discarded": 1}
+    assert res.row("kf_updated").stats.count == 2
+    assert res.row("radar_validated").stats.count == 1
     assert res.row("radar_validated").stats.mean == pytest.approx(2.0)
-    assert res.steps == 2
+    assert res.steps == 3
 
 
 def _synthetic_flight() -> tuple[object, object]:

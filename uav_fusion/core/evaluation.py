@@ -534,10 +534,23 @@ def step_class(step: Any) -> str:
     return str(step.status)
 
 
+def step_validated(step: Any) -> bool:
+    """Did the step's measurement pass the filter's gates (the "after validation" rows)?
+
+    The step's ``validated`` flag when it has one (an estimator step started from a
+    measurement is an update but its measurement was never tested against a prediction, so
+    it is not validated); otherwise its Table II class being "updated".
+    """
+    flag = getattr(step, "validated", None)
+    if isinstance(flag, bool):
+        return flag
+    return step_class(step) == UPDATED
+
+
 def feed_steps(
     ev: Evaluator, steps: Iterable[Any], measurements: Iterable[Measurement] = ()
 ) -> None:
-    """Feed filter steps; an ``updated`` step also feeds its accepted measurement.
+    """Feed filter steps; a validated step (:func:`step_validated`) also feeds its measurement.
 
     A step is any object with ``t``, ``source``, ``status`` and ``x`` (state, at least 3
     values), classed by :func:`step_class`. The accepted measurement is the step's ``z``
@@ -548,7 +561,7 @@ def feed_steps(
     for s in steps:
         status = step_class(s)
         ev.add_step(s.t, status, np.asarray(s.x, dtype=float).reshape(-1))
-        if status != UPDATED:
+        if not step_validated(s):
             continue
         z = getattr(s, "z", None)
         if z is None:
