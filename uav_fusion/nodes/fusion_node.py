@@ -10,6 +10,20 @@ than that are dropped and counted (``late_<source>``). At the end of a stream th
 flushed by an idle timer (``idle_flush_s`` of wall time without input), by the
 ``fusion/flush`` service (std_srvs/Trigger) and on shutdown.
 
+Time faults: a stamp more than ``max_future_s`` ahead of the simulated clock is dropped
+(``<source>_future``). Without a simulated clock the reference is the latest stamp seen: a
+stamp that far ahead is held back until the next message of the same stream confirms the
+jump (a real gap in the data: both are then processed) or contradicts it (a lone bad stamp:
+dropped as ``<source>_future``), so one bad stamp cannot drag the reorder watermark ahead and
+make every later message "late". A backwards jump of the simulated clock by more than
+``clock_jump_back_s`` (a bag loop) processes what is buffered, resets the filter and the
+reorder buffer, logs a warning and counts ``clock_jumps_back``.
+
+Accounting: for each input stream, ``received_<s>`` = ``used_<s>`` + the sum of
+``rejected_<s>_<reason>`` (refused by the estimator: gates, not selected, failed RF
+attempts, ...) + the sum of ``dropped_<s>_<reason>`` (never reached the estimator) +
+``buffer_pending`` + ``held_<s>`` (the last two are 0 after a flush).
+
 Publishes, for every filter step, nav_msgs/Odometry on ``fusion/odom`` and the same message
 on ``fusion/odom/updated`` or ``fusion/odom/coasted``; for every accepted measurement the
 measurement itself on ``fusion/accepted/radar`` or ``fusion/accepted/rf``; and counters on
@@ -83,6 +97,17 @@ def fusion_params() -> list[Param]:
             lo=0.05, hi=3600.0, read_only=False,
         ),
         Param("qos_depth", 1000, "history depth of the reliable streams", lo=1, hi=1000000),
+        Param(
+            "max_future_s", 30.0,
+            "sensor seconds a stamp may lie ahead of the simulated clock (or, without one, of "
+            "the latest stamp seen) before it is held or dropped as 'future'",
+            lo=0.001, hi=1.0e9,
+        ),
+        Param(
+            "clock_jump_back_s", 1.0,
+            "a backwards jump of the simulated clock larger than this resets the filter",
+            lo=0.0, hi=1.0e9,
+        ),
     ]
 
 
@@ -97,10 +122,13 @@ class FusionNode(Node):
         self.frame = str(self.p["world_frame"] or self.site.frame_id)
         self.child_frame = str(self.p["child_frame_id"])
         self.estimator = FusionEstimator(self.profile, self.site)
-        self.buffer: ReorderBuffer[Measurement] = ReorderBuffer(
-            float(self.p["reorder_window_s"]), [RADAR, RF], grouped=[RADAR]
-        )
+        self.buffer: ReorderBuffer[Measurement] = self._new_buffer()
         self.received: Counter[str] = Counter()
+        self.used: Counter[str] = Counter()
+        self.refused: Counter[str] = Counter()  # "<source>_<reason>"
+        self._held: dict[str, list[tuple[float, Measurement | None]]] = {RADAR: [], RF: []}
+        self._last_clock: float | None = None
+        self.clock_jumps_back = 0
         self.dropped: Counter[str] = Counter()
         self.statuses: Counter[str] = Counter()
         self.reasons: Counter[str] = Counter()
@@ -136,6 +164,9 @@ class FusionNode(Node):
             f"'{self.profile.name}', reorder window {self.buffer.window_s:g} s"
         )
 
+    def _new_buffer(self) -> ReorderBuffer[Measurement]:
+        return ReorderBuffer(float(self.p["reorder_window_s"]), [RADAR, RF], grouped=[RADAR])
+
     # --- parameters -----------------------------------------------------------------------
     def _on_params(self, params: list[Any]) -> Any:
         from rcl_interfaces.msg import SetParametersResult
@@ -157,6 +188,7 @@ class FusionNode(Node):
         self._rates[source].append(now)
 
     def _on_radar(self, msg: PoseWithCovarianceStamped) -> None:
+        self._check_clock()
         self._note_input(RADAR)
         try:
             m = cv.msg_to_radar_measurement(msg, self.frame, seq=self._next_seq())
@@ -165,27 +197,106 @@ class FusionNode(Node):
             return
         if not self.p["use_message_covariance"]:
             m.R = None
-        self._push(m)
+        self._admit(RADAR, m.t, m)
 
     def _on_rf(self, msg: PointStamped) -> None:
+        self._check_clock()
         self._note_input(RF)
         try:
             m = cv.msg_to_rf_measurement(msg, self.frame, seq=self._next_seq())
         except cv.MessageError as exc:
             self._drop(RF, exc)
             return
-        if m is None:  # failed attempt: the RF stream moved on, nothing to fuse
-            self.statuses["rf_failed_attempt"] += 1
-            self.buffer.note(RF, cv.time_from_stamp(msg.header.stamp))
-        else:
-            self._push(m)
+        # None = a failed attempt: the RF stream moved on, nothing to fuse
+        self._admit(RF, cv.time_from_stamp(msg.header.stamp), m)
         self._process(self.buffer.release(self._sim_now()))
 
     def _drop(self, source: str, exc: cv.MessageError) -> None:
-        key = f"{source}_{exc.reason}"
+        self._count_drop(source, exc.reason, f"dropping bad {source} message(s): {exc}")
+
+    def _count_drop(self, source: str, reason: str, warning: str, n: int = 1) -> None:
+        key = f"{source}_{reason}"
         if self.dropped[key] == 0:
-            self.get_logger().warning(f"dropping bad {source} message(s): {exc}")
-        self.dropped[key] += 1
+            self.get_logger().warning(warning)
+        self.dropped[key] += n
+
+    # --- stamps far ahead and clock jumps ---------------------------------------------------
+    def _admit(self, source: str, t: float, m: Measurement | None) -> None:
+        """Pass a stamp on unless it lies implausibly far ahead (see the module docstring)."""
+        horizon = float(self.p["max_future_s"])
+        clock = self._sim_now()
+        ref = clock if clock is not None else self.buffer.watermark
+        held = self._held[source]
+        if not math.isfinite(ref) or t <= ref + horizon:
+            if held:  # the stream continued on the old timeline: the held stamp was bad
+                self._drop_held(source)
+            self._enter(source, t, m)
+            return
+        what = (
+            f"{source} stamp {t:.3f} is {t - ref:.1f} s ahead of "
+            f"{'the simulated clock' if clock is not None else 'the latest stamp'} "
+            f"(max_future_s {horizon:g})"
+        )
+        if clock is not None:
+            self._count_drop(source, "future", what + ": dropped")
+            return
+        if held and t == held[-1][0]:  # another report of the same held frame
+            held.append((t, m))
+            return
+        if held and held[-1][0] < t <= held[-1][0] + horizon:  # confirmed: the data jumped
+            self.get_logger().warning(
+                f"{what}, confirmed by the next message: following the jump"
+            )
+            for ht, hm in held:
+                self._enter(source, ht, hm)
+            held.clear()
+            self._enter(source, t, m)
+            return
+        if held:
+            self._drop_held(source)
+        held.append((t, m))
+
+    def _drop_held(self, source: str) -> None:
+        held = self._held[source]
+        t = held[0][0]
+        self._count_drop(
+            source, "future",
+            f"{source} stamp {t:.3f} lay far ahead of the stream and was not confirmed by the "
+            "next message: dropped",
+            n=len(held),
+        )
+        held.clear()
+
+    def _enter(self, source: str, t: float, m: Measurement | None) -> None:
+        if m is None:
+            self.refused[f"{source}_failed_attempt"] += 1
+            self.statuses["rf_failed_attempt"] += 1
+            self.buffer.note(source, t)
+        else:
+            self._push(m)
+
+    def _check_clock(self) -> None:
+        """Detect a backwards jump of the simulated clock (bag loop) and start over."""
+        now = self._sim_now()
+        if now is None:
+            return
+        last = self._last_clock
+        self._last_clock = now
+        if last is None or last - now <= float(self.p["clock_jump_back_s"]):
+            return
+        n = self.buffer.pending
+        self._process(self.buffer.flush())
+        for src, held in self._held.items():
+            if held:
+                self._drop_held(src)
+        self.estimator.reset("clock_jump_back")
+        self.buffer = self._new_buffer()
+        self.clock_jumps_back += 1
+        self.get_logger().warning(
+            f"simulated clock jumped back {last - now:.3f} s (from {last:.3f} to {now:.3f}; "
+            f"a bag loop?): processed {n} buffered measurement(s) of the old timeline, "
+            "reset the filter and the reorder buffer"
+        )
 
     def _push(self, m: Measurement) -> None:
         if not self.buffer.push(m.source, m.t, m):
@@ -216,7 +327,7 @@ class FusionNode(Node):
                     for m in b.items:
                         steps.extend(self.estimator.process(m))
             except UavFusionError as exc:  # the estimator refused the input: count, go on
-                self.dropped[f"{b.source}_refused"] += 1
+                self.dropped[f"{b.source}_refused"] += len(b.items)
                 self.get_logger().warning(f"estimator refused {b.source} at {b.t:.3f}: {exc}")
                 continue
             by_seq = {m.seq: m for m in b.items}
@@ -226,6 +337,10 @@ class FusionNode(Node):
     def _publish_step(self, step: Any, by_seq: dict[int, Measurement]) -> None:
         status = str(step.status)
         self.statuses[status] += 1
+        if step.updated:
+            self.used[str(step.source)] += 1
+        else:
+            self.refused[f"{step.source}_{step.reason or status}"] += 1
         if not step.updated and step.reason:
             self.reasons[str(step.reason)] += 1
         if step.nis is not None and math.isfinite(step.nis):
@@ -248,7 +363,13 @@ class FusionNode(Node):
             self.accepted_published += 1
 
     def flush(self) -> int:
-        """Process everything held in the reorder buffer; returns the number of items."""
+        """Process everything held in the reorder buffer; returns the number of items.
+
+        Stamps held back as too far ahead (unconfirmed) are dropped as ``future``.
+        """
+        for src, held in self._held.items():
+            if held:
+                self._drop_held(src)
         n = self.buffer.pending
         self._process(self.buffer.flush())
         return n
@@ -260,10 +381,12 @@ class FusionNode(Node):
         return resp
 
     def _on_idle(self) -> None:
+        self._check_clock()
         idle = float(self.get_parameter("idle_flush_s").value)
         if self.buffer.pending:
             self._process(self.buffer.release(self._sim_now()))
-        if idle > 0 and self.buffer.pending and time.monotonic() - self._last_input >= idle:
+        pending = self.buffer.pending or any(self._held.values())
+        if idle > 0 and pending and time.monotonic() - self._last_input >= idle:
             n = self.flush()
             self.get_logger().info(f"no input for {idle:g} s: flushed {n} measurement(s)")
 
@@ -273,6 +396,10 @@ class FusionNode(Node):
         vals: dict[str, Any] = {}
         for src in (RADAR, RF):
             vals[f"received_{src}"] = self.received[src]
+            vals[f"used_{src}"] = self.used[src]
+            vals[f"held_{src}"] = len(self._held[src])
+        for k, v in sorted(self.refused.items()):
+            vals[f"rejected_{k}"] = v
         for k, v in sorted(self.statuses.items()):
             vals[f"steps_{k}"] = v
         for k, v in sorted(self.reasons.items()):
@@ -297,6 +424,7 @@ class FusionNode(Node):
         vals["steps_published"] = self.steps_published
         vals["buffer_pending"] = self.buffer.pending
         vals["buffer_max_depth"] = self.buffer.max_depth
+        vals["clock_jumps_back"] = self.clock_jumps_back
         return {k: str(v) for k, v in vals.items()}
 
     def publish_diagnostics(self) -> None:
@@ -315,7 +443,7 @@ class FusionNode(Node):
 
     def destroy_node(self) -> None:
         try:
-            if self.buffer.pending and self.context.ok():
+            if (self.buffer.pending or any(self._held.values())) and self.context.ok():
                 self.flush()
         finally:
             super().destroy_node()
