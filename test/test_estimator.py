@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import argparse
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -496,19 +496,37 @@ def test_estimate_r_writes_profile_keeping_comments(tmp_path: Path) -> None:
     assert p.q == load_profile("paper").q
 
 
-def test_run_command_on_a_flight_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from uav_fusion.commands import run_offline
+def test_run_command_on_the_default_flight(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from uav_fusion.cli import main
 
-    with pytest.raises(DataError):
-        run_offline.run(
-            argparse.Namespace(
-                folder=str(tmp_path / "missing"),
-                profile="paper",
-                site=None,
-                out=None,
-                rf_file="AADM.csv",
-                selection=None,
-                sources="both",
-                strict=False,
-            )
-        )
+    out = tmp_path / "steps.csv"
+    assert main(["run", "--profile", "paper", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    m = re.search(r"^  steps: (\d+) = (\d+) updated \+ (\d+) coasted", text, re.MULTILINE)
+    assert m is not None, text
+    steps, upd, coast = (int(g) for g in m.groups())
+    assert steps == upd + coast > 0
+    assert "largest_track" in text and "re-initialisations" in text
+    rows = out.read_text().splitlines()
+    n_meas = int(text.split(" measurements in ")[0].rsplit(maxsplit=1)[-1])
+    assert len(rows) == n_meas + 1
+    assert main(["run", str(tmp_path / "missing")]) == 2
+    assert "flight folder not found" in capsys.readouterr().err
+
+
+def test_estimate_r_command_writes_a_loadable_profile(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from uav_fusion.cli import main
+    from uav_fusion.resources import config_path
+
+    f = tmp_path / "p.yaml"
+    f.write_text(config_path("profiles/paper.yaml").read_text())
+    assert main(["estimate-r", "--rf-method", "all", "--write-profile", str(f)]) == 0
+    text = capsys.readouterr().out
+    assert "R_radar (m^2)" in text and "R_rf (m^2)" in text and "suggest q" in text
+    p = load_profile(f)
+    assert p.r_rf[0, 0] > 100 * load_profile("paper").r_rf[0, 0]  # the literal, heavy-tailed R
+    assert "--rf-method all" in p.r_note
