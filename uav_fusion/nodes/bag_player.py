@@ -162,6 +162,8 @@ class BagPlayer(Node):
         self._thread: threading.Thread | None = None
         self.error: str | None = None
         self.ack_wait_s = 0.0
+        self.summary = ""
+        self._t_begin = 0.0
         self._last_clock: int | None = None
 
     @staticmethod
@@ -192,9 +194,12 @@ class BagPlayer(Node):
     def _run(self) -> None:
         try:
             self._play()
-        except Exception as exc:  # e.g. the context was shut down under us
-            if not self._stop.is_set():
+        except Exception as exc:
+            if self.context.ok() and not self._stop.is_set():
                 self.error = f"{type(exc).__name__}: {exc}"
+            else:  # shut down under us (Ctrl-C): report what was played
+                self._stop.set()
+                self._make_summary()
         finally:
             self.finished.set()
 
@@ -213,6 +218,21 @@ class BagPlayer(Node):
                 return
             time.sleep(0.02)
 
+    def _make_summary(self) -> bool:
+        """Set :attr:`summary`; returns whether playback was interrupted."""
+        wall = time.monotonic() - self._t_begin if self._t_begin else 0.0
+        interrupted = self._stop.is_set()
+        per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.played.items()))
+        skipped = "; skipped " + ", ".join(
+            f"{t} ({self.reader.topics[t].count}: {why})" for t, why in self.skipped.items()
+        ) if self.skipped else ""
+        self.summary = (
+            f"played {sum(self.played.values())} messages in {wall:.2f} s at rate {self.rate:g}"
+            f" ({self.passes} pass{'es' if self.passes != 1 else ''}"
+            f"{', interrupted' if interrupted else ''}): {per_topic or 'nothing'}{skipped}"
+        )
+        return interrupted
+
     def _publish_clock(self, stamp_ns: int) -> None:
         if self._clock_pub is not None and stamp_ns != self._last_clock:
             self._last_clock = stamp_ns
@@ -224,7 +244,7 @@ class BagPlayer(Node):
         if self.wait_for_subs:
             self._wait_for_subscribers()
         topics = list(self._pubs)
-        t_begin = time.monotonic()
+        self._t_begin = time.monotonic()
         tick = 1.0 / self.clock_hz if self.clock_hz > 0 else None
         while not self._stop.is_set():
             wall0 = time.monotonic()
@@ -252,7 +272,9 @@ class BagPlayer(Node):
             self.passes += 1
             if not self.loop or (self.loop_count and self.passes >= self.loop_count):
                 break
-        wall = time.monotonic() - t_begin
+        interrupted = self._make_summary()
+        if interrupted:
+            return  # main() reports; the context may already be shut down
         t_ack = time.monotonic()
         unacked = [
             self._out[n] for n, pub in self._pubs.items()
@@ -263,13 +285,7 @@ class BagPlayer(Node):
             self.get_logger().warning(
                 f"not acknowledged by every subscriber within 5 s: {', '.join(unacked)}")
         self.ack_wait_s = time.monotonic() - t_ack
-        per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.played.items()))
-        skipped = "; skipped " + ", ".join(
-            f"{t} ({self.reader.topics[t].count}: {why})" for t, why in self.skipped.items()
-        ) if self.skipped else ""
-        self.get_logger().info(
-            f"played {sum(self.played.values())} messages in {wall:.2f} s at rate {self.rate:g}"
-            f" ({self.passes} pass{'es' if self.passes != 1 else ''}): {per_topic}{skipped}")
+        self.get_logger().info(self.summary)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -297,6 +313,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         code = 130 if node is None or not node.finished.is_set() else 0
+        if node is not None:
+            node.stop()
+            if node.summary:
+                print(f"bag_player: {node.summary}", file=sys.stderr)
     finally:
         if node is not None:
             node.stop()
