@@ -314,3 +314,30 @@ def test_without_subscribers_it_waits_then_plays_anyway(ros: None, tmp_path: Pat
     s = sink({"/unrelated": PointStamped})
     player = play(s, bag, 0, wait_timeout=0.3)
     assert player.played == Counter({"/a": 2}) and s.got == []
+
+
+@pytest.mark.processes
+def test_ctrl_c_stops_cleanly_and_reports_what_was_played(tmp_path: Path) -> None:
+    import signal
+
+    bag = make_bag(tmp_path / "b", [0.0, 0.01, 60.0])  # the last message is a minute away
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "uav_fusion.nodes.bag_player", str(bag),
+         "--ros-args", "-p", "wait_for_subscribers:=false"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert proc.stdout is not None
+        head = []
+        for line in proc.stdout:  # wait until playback has started
+            head.append(line)
+            if "playing" in line:
+                break
+        time.sleep(0.5)  # the first two messages are 10 ms apart, the third a minute later
+        proc.send_signal(signal.SIGINT)
+        out = "".join(head) + proc.communicate(timeout=30)[0]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, out
+    assert "Traceback" not in out
+    assert "interrupted" in out and "/a 2" in out

@@ -244,6 +244,9 @@ class BagPlayer(Node):
         if self.wait_for_subs:
             self._wait_for_subscribers()
         topics = list(self._pubs)
+        self.get_logger().info(
+            f"playing {self.reader.path} at rate {self.rate:g}: "
+            + ", ".join(f"{self._out[t]} {self.reader.topics[t].count}" for t in topics))
         self._t_begin = time.monotonic()
         tick = 1.0 / self.clock_hz if self.clock_hz > 0 else None
         while not self._stop.is_set():
