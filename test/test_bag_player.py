@@ -341,3 +341,19 @@ def test_ctrl_c_stops_cleanly_and_reports_what_was_played(tmp_path: Path) -> Non
     assert proc.returncode == 130, out
     assert "Traceback" not in out
     assert "interrupted" in out and "/a 2" in out
+
+
+def test_a_recorded_clock_is_replaced_by_the_players(ros: None, tmp_path: Path) -> None:
+    w = BagWriter(tmp_path / "b")
+    w.add_topic("/a", PS)
+    w.add_topic("/clock", "rosgraph_msgs/msg/Clock")
+    for i in range(4):
+        c = Clock()
+        c.clock.sec = 5  # a stale recorded clock, far from the bag's time
+        w.write("/clock", T0 + i * 10_000_000, bytes(serialize_message(c)))
+        w.write("/a", T0 + i * 10_000_000 + 1, point(i))
+    w.close()
+    s = sink({"/a": PointStamped}, clock=True)
+    player = play(s, tmp_path / "b", 4)
+    assert "/clock" in player.skipped
+    assert s.clock and all(c >= T0 for c in s.clock)

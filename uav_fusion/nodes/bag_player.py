@@ -125,10 +125,15 @@ class BagPlayer(Node):
         self.skipped: dict[str, str] = {}
         self._pubs: dict[str, Publisher] = {}  # bag topic name -> publisher
         self._out: dict[str, str] = {}  # bag topic name -> output topic
+        publish_clock = bool(g("publish_clock").value)
         for t in self.reader.topics.values():
             if wanted and _abs(t.name) not in wanted:
                 continue
             if t.count == 0:
+                continue
+            if publish_clock and _abs(t.name) == "/clock":
+                # two /clock sources would fight; the player's own follows the bag anyway
+                self.skipped[t.name] = "recorded /clock replaced by the player's (publish_clock)"
                 continue
             if t.serialization_format != "cdr":
                 self.skipped[t.name] = f"serialization '{t.serialization_format}' is not cdr"
@@ -149,7 +154,7 @@ class BagPlayer(Node):
                                     else ""))
         self._clock_pub = (
             self.create_publisher(Clock, "/clock", QoSProfile(depth=10))
-            if g("publish_clock").value else None
+            if publish_clock else None
         )
         start = self.reader.start_ns + int(float(g("start_offset").value) * 1e9)
         dur = float(g("duration").value)
