@@ -10,23 +10,24 @@ than that are dropped and counted (``late_<source>``). At the end of a stream th
 flushed by an idle timer (``idle_flush_s`` of wall time without input), by the
 ``fusion/flush`` service (std_srvs/Trigger) and on shutdown.
 
-Time faults: a stamp more than ``max_future_s`` ahead of the simulated clock is dropped
-(``<source>_future``). Without a simulated clock the reference is the latest stamp seen: a
-stamp that far ahead is held back until the next message of the same stream confirms the
-jump (a real gap in the data: both are then processed) or contradicts it (a lone bad stamp:
-dropped as ``<source>_future``), so one bad stamp cannot drag the reorder watermark ahead and
-make every later message "late". A backwards jump of the simulated clock by more than
-``clock_jump_back_s`` (a bag loop) processes what is buffered, resets the filter and the
-reorder buffer, logs a warning and counts ``clock_jumps_back``.
+Time faults: a stamp more than ``max_future_s`` ahead of the latest stamp seen (or of the
+simulated clock, if that is later) is held back until the next message of the same stream
+confirms the jump (a real gap in the data: both are then processed) or contradicts it (a
+lone bad stamp: dropped as ``<source>_future``), so one bad stamp cannot drag the reorder
+watermark ahead and make every later message "late". A backwards jump of the simulated clock
+by more than ``clock_jump_back_s`` (a bag loop) processes what is buffered, resets the filter
+and the reorder buffer, logs a warning and counts ``clock_jumps_back``.
 
 Accounting: for each input stream, ``received_<s>`` = ``used_<s>`` + the sum of
 ``rejected_<s>_<reason>`` (refused by the estimator: gates, not selected, failed RF
-attempts, ...) + the sum of ``dropped_<s>_<reason>`` (never reached the estimator) +
+attempts, ...) + the sum of ``dropped_<s>_<reason>`` and ``dropped_late_<s>`` (never
+reached the estimator) +
 ``buffer_pending`` + ``held_<s>`` (the last two are 0 after a flush).
 
 Publishes, for every filter step, nav_msgs/Odometry on ``fusion/odom`` and the same message
 on ``fusion/odom/updated`` or ``fusion/odom/coasted``; for every accepted measurement the
-measurement itself on ``fusion/accepted/radar`` or ``fusion/accepted/rf``; and counters on
+measurement itself on ``fusion/accepted/radar`` or ``fusion/accepted/rf`` (passed every gate,
+NIS included; a measurement that only started the track is not "accepted"); and counters on
 ``/diagnostics``. Malformed messages (NaN, bad covariance, wrong frame, zero stamp) are
 dropped and counted by reason — never a traceback.
 """
@@ -225,7 +226,7 @@ class FusionNode(Node):
         """Pass a stamp on unless it lies implausibly far ahead (see the module docstring)."""
         horizon = float(self.p["max_future_s"])
         clock = self._sim_now()
-        ref = clock if clock is not None else self.buffer.watermark
+        ref = self.buffer.watermark if clock is None else max(clock, self.buffer.watermark)
         held = self._held[source]
         if not math.isfinite(ref) or t <= ref + horizon:
             if held:  # the stream continued on the old timeline: the held stamp was bad
@@ -233,13 +234,9 @@ class FusionNode(Node):
             self._enter(source, t, m)
             return
         what = (
-            f"{source} stamp {t:.3f} is {t - ref:.1f} s ahead of "
-            f"{'the simulated clock' if clock is not None else 'the latest stamp'} "
-            f"(max_future_s {horizon:g})"
+            f"{source} stamp {t:.3f} is {t - ref:.1f} s ahead of the latest stamp or "
+            f"simulated clock (max_future_s {horizon:g})"
         )
-        if clock is not None:
-            self._count_drop(source, "future", what + ": dropped")
-            return
         if held and t == held[-1][0]:  # another report of the same held frame
             held.append((t, m))
             return
@@ -290,6 +287,9 @@ class FusionNode(Node):
             if held:
                 self._drop_held(src)
         self.estimator.reset("clock_jump_back")
+        # time starts again: forget the old timeline so earlier stamps are not "out of order"
+        self.estimator.t = None
+        self.estimator.last_used_t = None
         self.buffer = self._new_buffer()
         self.clock_jumps_back += 1
         self.get_logger().warning(
@@ -351,7 +351,9 @@ class FusionNode(Node):
         self.pub_odom.publish(odom)
         (self.pub_updated if step.updated else self.pub_coasted).publish(odom)
         self.steps_published += 1
-        if step.updated:
+        # the accepted-measurement topics carry what passed every gate (NIS included):
+        # a measurement that only (re)started the track was not validated
+        if getattr(step, "validated", step.updated):
             m = by_seq.get(int(step.seq))
             if m is None:
                 return
