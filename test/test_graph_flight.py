@@ -4,7 +4,8 @@
 straight-and-turn flight near the radar: the UAV's radar track (with an ID change halfway,
 so track selection matters), a clutter track with a low UAV probability, a second
 UAV-classed fragment in some frames (frames with several candidates), and RF fixes every
-3.88 s with a few failed attempts and a gross outlier (so the NIS gate rejects something). The UAV's first track id is the largest track.
+3.88 s with a few failed attempts and a gross outlier (so the NIS gate rejects
+something). The UAV's first track id is the largest track.
 """
 
 from __future__ import annotations

@@ -74,10 +74,13 @@ def test_rf_and_truth_replay_publish_every_record(ctx: Context, flight_dir: Path
         ex.add_node(n)
     rf.start_standalone()
     truth.start_standalone()
+    end = max(flight.truth[-1].t, flight.rf[-1].t, flight.radar[-1].t)
     spin_until(
         ex,
         lambda: len(col.got["rf/fix"]) == len(flight.rf)
-        and len(col.got["truth/fix"]) == len(flight.truth),
+        and len(col.got["truth/fix"]) == len(flight.truth)
+        and bool(col.got["/clock"])
+        and cv.time_from_stamp(col.got["/clock"][-1].clock) == end,
     )
     assert rf.finished and truth.finished
     # RF: stamps and positions exact, failed attempts as NaN
@@ -94,7 +97,7 @@ def test_rf_and_truth_replay_publish_every_record(ctx: Context, flight_dir: Path
     # the clock is monotonic and ends at the flight's last time
     clock = [cv.time_from_stamp(c.clock) for c in col.got["/clock"]]
     assert clock == sorted(clock)
-    assert clock[-1] == max(flight.truth[-1].t, flight.rf[-1].t, flight.radar[-1].t)
+    assert clock[0] == min(flight.truth[0].t, flight.rf[0].t, flight.radar[0].t)
     for n in (rf, truth, col):
         n.destroy_node()
 

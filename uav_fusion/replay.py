@@ -110,7 +110,7 @@ def replay_params(publish_clock: bool) -> list[Param]:
         Param("batch_size", 50, "most events per batch when rate = 0", lo=1, hi=100000),
         Param(
             "batch_span_s",
-            0.5,
+            1.0,
             "most sensor seconds one batch spans when rate = 0 (keep below the fusion "
             "node's reorder_window_s)",
             lo=0.0,
@@ -293,7 +293,9 @@ class ReplayDriver:
         limit = len(self.events)
         horizon = self._horizon()
         if self.rate == 0.0 and not self.follow:
-            if not self._all_acked() or (self.drained is not None and not self.drained()):
+            # consumers in this process: "taken" is stronger than "acknowledged"
+            ready = self.drained() if self.drained is not None else self._all_acked()
+            if not ready:
                 return
             limit = self.batch_size
             if self._next < len(self.events):

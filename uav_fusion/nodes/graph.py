@@ -105,7 +105,10 @@ class Graph:
             self.truth,
             rate=self.rate,
             publish_clock=True,
-            clock_period_s=float(tp["clock_period_s"]),
+            # rate 0: a short tick, since each batch waits for the consumers to catch up
+            clock_period_s=min(float(tp["clock_period_s"]), 0.002)
+            if self.rate == 0.0
+            else float(tp["clock_period_s"]),
             wait_for_subscribers_s=float(tp["wait_for_subscribers_s"]),
             batch_size=int(tp["batch_size"]),
             span=flight_span(self.truth.flight),
