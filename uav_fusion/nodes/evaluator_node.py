@@ -15,6 +15,14 @@ counted by topic and reason and dropped. Every ``log_period_s`` the node logs a 
 and publishes the rows on ``/diagnostics``. The report (report.md, metrics.csv,
 metrics.json, figures) is written to ``output_dir`` when the ``~/write_report`` service
 (std_srvs/Trigger) is called and, if ``write_on_shutdown`` is true, when the node stops.
+
+Faults: per topic, ``received`` = ``used`` + ``refused`` (the Evaluator's own drops) +
+``dropped`` (malformed messages, by reason); all three are on ``/diagnostics`` and in the
+report. Gaps between fused steps longer than ``step_gap_s`` (a fusion node that stopped or
+restarted) are listed in the report and on ``/diagnostics``. A backwards jump of the
+simulated clock by more than ``clock_jump_back_s`` (a bag loop) writes the report of the
+finished timeline to ``<output_dir>/before_clock_jump_<k>``, restarts the evaluation and
+logs a warning.
 """
 
 from __future__ import annotations
@@ -27,10 +35,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -47,6 +58,7 @@ from uav_fusion.conversions import (
     odometry_to_state,
     time_from_stamp,
 )
+from uav_fusion.core.dataset import fmt_utc
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
 from uav_fusion.core.report import ReportFiles, write_report
@@ -82,6 +94,11 @@ PARAMS: tuple[Param, ...] = (
     Param("figures", True, "draw the PNG figures", read_only=False),
     Param("qos_depth", 1000, "subscription queue depth", lo=1, hi=1_000_000),
     Param("flight_name", "", "flight name written into the report", read_only=False),
+    Param("step_gap_s", 10.0, "gaps between fused steps longer than this are reported (s)",
+          lo=1e-3, hi=1e9),
+    Param("clock_jump_back_s", 1.0,
+          "a backwards jump of the simulated clock larger than this restarts the evaluation",
+          lo=0.0, hi=1e9),
 )
 
 
@@ -109,16 +126,21 @@ class EvaluatorNode(Node):
         depth = int(v["qos_depth"])
         self.flight_name = str(v["flight_name"])
 
+        self._tolerance, self._max_gap = tolerance, max_gap
+        self.step_gap_s = float(v["step_gap_s"])
+        self.clock_jump_back_s = float(v["clock_jump_back_s"])
         try:
             self.site: Site = load_site(site_file or None)
-            self.evaluator = Evaluator(
-                radar_enu=self.site.radar.enu, tolerance_s=tolerance, max_truth_gap_s=max_gap
-            )
+            self.evaluator = self._new_evaluator()
         except (UavFusionError, ValueError) as exc:
             raise UavFusionError(f"{NODE_NAME}: bad parameters: {exc}") from None
         self.frame_id = frame or self.site.frame_id
         self.dropped: Counter[str] = Counter()
         self.received: Counter[str] = Counter()
+        self.used: Counter[str] = Counter()
+        self.refused: Counter[str] = Counter()
+        self.clock_jumps_back = 0
+        self._last_clock: float | None = None
         self._lock = threading.Lock()
         self.last_report: ReportFiles | None = None
 
@@ -140,18 +162,54 @@ class EvaluatorNode(Node):
         self.create_service(Trigger, "~/write_report", self._on_write_report)
         if self.log_period_s > 0 and math.isfinite(self.log_period_s):
             self.create_timer(self.log_period_s, self._on_timer)
+        self.create_timer(0.2, self._check_clock, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f"scoring against truth on '{self.truth_topic}' in frame '{self.frame_id}'; "
             f"report -> {self.output_dir} (service ~/write_report)"
         )
 
+    def _new_evaluator(self) -> Evaluator:
+        return Evaluator(
+            radar_enu=self.site.radar.enu,
+            tolerance_s=self._tolerance,
+            max_truth_gap_s=self._max_gap,
+        )
+
+    def _check_clock(self) -> None:
+        """A backwards jump of the simulated clock (bag loop): report and start over."""
+        if not self.get_parameter("use_sim_time").value:
+            return
+        ns = self.get_clock().now().nanoseconds
+        if ns <= 0:
+            return
+        now = ns / 1e9
+        last, self._last_clock = self._last_clock, now
+        if last is None or last - now <= self.clock_jump_back_s:
+            return
+        self.clock_jumps_back += 1
+        k = self.clock_jumps_back
+        where = "not written"
+        try:
+            files = self.write_report(self.output_dir / f"before_clock_jump_{k}")
+            where = str(files.folder)
+        except (UavFusionError, OSError) as exc:
+            where = f"not written ({exc})"
+        with self._lock:
+            self.evaluator = self._new_evaluator()
+        self.get_logger().warning(
+            f"simulated clock jumped back {last - now:.3f} s (from {last:.3f} to {now:.3f}; a "
+            f"bag loop?): evaluation restarted; report of the finished timeline: {where}"
+        )
+
     # --- input -----------------------------------------------------------------------------
     def _guard(self, topic: str, fn: Callable[[M], bool], msg: M) -> None:
         """Run one message's conversion + feed; count and drop anything malformed."""
+        self._check_clock()
         self.received[topic] += 1
         try:
             with self._lock:
-                fn(msg)  # a refusal is counted, by reason, in the Evaluator's drops
+                kept = fn(msg)  # a refusal is counted, by reason, in the Evaluator's drops
+            (self.used if kept else self.refused)[topic] += 1
         except MessageError as exc:
             self.dropped[f"{topic}: {exc.reason}"] += 1
         except (ValueError, TypeError, OverflowError, IndexError) as exc:
@@ -260,8 +318,14 @@ class EvaluatorNode(Node):
         inp.message = f"{sum(self.received.values())} messages, {n_drop} dropped"
         inp.values = [KeyValue(key=f"received {k}", value=str(v)) for k, v in
                       sorted(self.received.items())]
+        inp.values += [KeyValue(key=f"used {k}", value=str(v)) for k, v in
+                       sorted(self.used.items())]
+        inp.values += [KeyValue(key=f"refused {k}", value=str(v)) for k, v in
+                       sorted(self.refused.items())]
         inp.values += [KeyValue(key=f"dropped {k}", value=str(v)) for k, v in
                        sorted(ev.dropped.items())]
+        inp.values.append(KeyValue(key="fused step gaps", value=self.gap_text(ev)))
+        inp.values.append(KeyValue(key="clock jumps back", value=str(self.clock_jumps_back)))
         arr.status.append(inp)
         return arr
 
@@ -272,18 +336,42 @@ class EvaluatorNode(Node):
         self.write_on_shutdown = bool(self.get_parameter("write_on_shutdown").value)
         self.flight_name = str(self.get_parameter("flight_name").value)
 
-    def write_report(self) -> ReportFiles:
+    def step_gaps(self, ev: Evaluation) -> list[tuple[float, float]]:
+        """(start, end) of every gap between fused steps longer than ``step_gap_s``."""
+        t = ev.samples["kf_all"].t
+        if t.size < 2:
+            return []
+        gaps = np.flatnonzero(np.diff(t) > self.step_gap_s)
+        return [(float(t[i]), float(t[i + 1])) for i in gaps]
+
+    def gap_text(self, ev: Evaluation) -> str:
+        gaps = self.step_gaps(ev)
+        if not gaps:
+            return f"none longer than {self.step_gap_s:g} s"
+        parts = [f"{b - a:.1f} s from {fmt_utc(a)} to {fmt_utc(b)}" for a, b in gaps]
+        return f"{len(gaps)} longer than {self.step_gap_s:g} s: " + "; ".join(parts)
+
+    def write_report(self, folder: Path | None = None) -> ReportFiles:
         """Score everything received so far and write the report to ``output_dir``."""
         self._refresh_runtime_params()
         ev = self.evaluate()
+
+        def counts(c: Counter[str]) -> str:
+            return ", ".join(f"{k} {v}" for k, v in sorted(c.items())) or "none"
+
         info = {
             "mode": f"live ({NODE_NAME})",
             "flight": self.flight_name or "(not given)",
             "site": str(self.site.source or self.site.name),
-            "messages received": ", ".join(f"{k} {v}" for k, v in sorted(self.received.items()))
-            or "none",
+            "messages received": counts(self.received),
+            "messages used": counts(self.used),
+            "messages refused": counts(self.refused),
+            "messages dropped": counts(self.dropped),
+            "fused step gaps": self.gap_text(ev),
+            "clock jumps back": str(self.clock_jumps_back),
         }
-        files = write_report(ev, self.output_dir, self.site, info, figures=self.figures)
+        out = self.output_dir if folder is None else folder
+        files = write_report(ev, out, self.site, info, figures=self.figures)
         self.last_report = files
         return files
 
