@@ -376,3 +376,27 @@ def test_bundled_bag_matches_the_bundled_flight(tmp_path: Path) -> None:
         pb = deserialize_message(b.data, PoseWithCovarianceStamped)
         assert list(pa.pose.covariance) == list(pb.pose.covariance), hint
         assert pa.pose.pose.position == pb.pose.pose.position, hint
+
+
+@pytest.mark.parametrize("compression", ["ZSTD", "LZ4"])
+def test_chunk_compressed_mcap_from_another_writer(tmp_path: Path, compression: str) -> None:
+    """A bare .mcap written by mcap-ros2-support (compressed chunks, its own schema text)."""
+    from mcap.writer import CompressionType
+    from mcap_ros2.writer import Writer
+
+    path = tmp_path / "other.mcap"
+    with path.open("wb") as fh:
+        w = Writer(fh, chunk_size=2000, compression=getattr(CompressionType, compression))
+        schema = w.register_msgdef(
+            "geometry_msgs/msg/Point", "float64 x\nfloat64 y\nfloat64 z\n"
+        )
+        for i in range(300):
+            w.write_message("/p", schema, {"x": float(i), "y": 0.0, "z": -1.0}, log_time=i)
+        w.finish()
+    r = BagReader(path)
+    assert r.message_count == 300 and r.warnings == []
+    assert r.topics["/p"].msgtype == "geometry_msgs/msg/Point"
+    from geometry_msgs.msg import Point
+
+    xs = [deserialize_message(m.data, Point).x for m in r.messages()]
+    assert xs == [float(i) for i in range(300)]
