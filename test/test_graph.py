@@ -80,7 +80,7 @@ def test_graph_track_and_table_equal_the_offline_run(
     graph, got = _run_graph(ctx, _overrides(flight_dir, tmp_path, rate, rf_delay))
     try:
         # the fused track: same steps, same times, states equal to 1e-9
-        assert len(got) == len(steps)
+        assert len(got) == len(steps), str(graph.fusion.diagnostics())
         assert [g.t for g in got] == [s.t for s in steps]
         err = np.abs(np.array([g.x for g in got]) - np.array([s.x for s in steps]))
         assert float(err.max()) < 1e-9

@@ -112,9 +112,7 @@ class Graph:
             wait_for_subscribers_s=float(tp["wait_for_subscribers_s"]),
             batch_size=int(tp["batch_size"]),
             span=flight_span(self.truth.flight),
-            batch_span_s=min(
-                float(tp["batch_span_s"]), 0.5 * float(self.fusion.p["reorder_window_s"])
-            ),
+            batch_span_s=self._batch_span(),
             drained=self.drained,
         )
         self._streams: dict[str, list[Any]] = {}
@@ -129,6 +127,17 @@ class Graph:
         )
         for node in self.nodes:
             self.executor.add_node(node)
+
+    def _batch_span(self) -> float:
+        """Sensor seconds one batch may span so that nothing reaches the fusion node late.
+
+        Inside a batch the executor may take one topic's messages before another's, so a
+        stream can lag by up to the span; a replay's ``delay_s`` adds to that. Both must
+        stay inside the fusion node's reorder window: span <= (window - largest delay) / 2.
+        """
+        window = float(self.fusion.p["reorder_window_s"])
+        delay = max(float(r.p["delay_s"]) for r in (self.truth, self.rf, self.radar))
+        return max(0.01, min(float(self.truth.p["batch_span_s"]), 0.5 * (window - delay)))
 
     # --- progress -------------------------------------------------------------------------
     def published(self, node: str) -> int:
