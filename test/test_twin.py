@@ -73,6 +73,7 @@ def test_round_trip_through_files_reproduces_the_twin(short_twin, site, tmp_path
     mt, menu = mine.truth_arrays()
     assert np.max(np.abs(lt - mt)) < 1e-5
     assert np.max(np.abs(lenu - menu)) < 1e-6
+    assert [f.line for f in loaded.truth] == [f.line for f in mine.truth]
     # the loaded truth is the simulated flight plus RTK noise (cm), nothing else
     sim = short_twin.traj.position(mt - short_twin.start_unix)
     assert np.max(np.abs(lenu - sim)) < 0.2
@@ -82,6 +83,7 @@ def test_round_trip_through_files_reproduces_the_twin(short_twin, site, tmp_path
     m_tr = [t for f in mine.radar for t in f.tracks]
     assert len(l_tr) == len(m_tr) > 0
     assert [t.track_id for t in l_tr] == [t.track_id for t in m_tr]
+    assert [t.line for t in l_tr] == [t.line for t in m_tr]
     le = np.array([(t.t, t.e, t.n, t.u) for t in l_tr])
     me = np.array([(t.t, t.e, t.n, t.u) for t in m_tr])
     assert np.max(np.abs(le[:, 0] - me[:, 0])) < 1e-5
@@ -97,6 +99,7 @@ def test_round_trip_through_files_reproduces_the_twin(short_twin, site, tmp_path
             assert la.e == pytest.approx(ma.e, abs=1e-6)
             assert la.n == pytest.approx(ma.n, abs=1e-6)
         assert la.valid_sensors == ma.valid_sensors
+        assert la.line == ma.line
 
 
 def test_files_follow_the_dataset_formats(short_twin, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
@@ -194,7 +197,7 @@ def test_flight_physics(short_twin) -> None:  # type: ignore[no-untyped-def]
     assert float(np.percentile(acc, 99)) < 4.0
     dt_truth = np.diff(short_twin.truth.t_us) / 1e6
     assert float(np.max(dt_truth)) <= 0.2 + 1e-9  # >= 5 Hz
-    assert tr.t_takeoff == pytest.approx(35.0, abs=0.05)  # the plan's hold before take-off
+    assert tr.t_takeoff == pytest.approx(55.0, abs=0.05)  # the plan's hold before take-off
 
 
 def test_tdoa_solver_recovers_exact_position(site) -> None:  # type: ignore[no-untyped-def]

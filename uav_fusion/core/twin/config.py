@@ -136,7 +136,7 @@ class Recording:
     """Where the recording sits in time and what the files are called."""
 
     start_utc: str = "2025-10-07 19:40:00"
-    tail_s: float = 20.0  # recording continues this long after landing
+    tail_s: float = 40.0  # recording continues this long after landing
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from uav_fusion.core.twin.config import TwinConfig
 from uav_fusion.core.twin.radar_model import SimRadarFrame, SimTrackReport, simulate_radar
 from uav_fusion.core.twin.rf_model import SimRfAttempt, simulate_rf
 from uav_fusion.core.twin.trajectory import FlightPlan, Trajectory, fly
+from uav_fusion.core.twin.writers import radar_line_layout
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -326,7 +327,10 @@ def twin_to_flight(twin: TwinFlight, rf_height: float | None = None) -> Flight:
     radar: list[RadarFrame] = []
     k = 0
     offset_radar = site.clock_offset_s("radar")
-    for line, f in enumerate(twin.radar, start=1):
+    layout = radar_line_layout(twin)
+    frame_line = {idx: line for line, idx in enumerate(layout, start=1) if idx >= 0}
+    for i, f in enumerate(twin.radar):
+        line = frame_line[i]
         ft = f.t_unix - offset_radar
         trs = []
         for tr in f.tracks:

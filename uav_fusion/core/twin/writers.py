@@ -145,7 +145,7 @@ def write_radar_jsonl(twin: TwinFlight, path: Path) -> None:
                         "range": _r(r.range_m, 2),
                         "radialVelocity": _r(r.radial_velocity),
                         "numInliers": r.num_inliers,
-                        "rcsDbsm": _r(r.rcs_dbsm, 2),
+                        "rcsDbsm": _r(r.rcs_dbsm, 3),
                     }
                 )
             if idx % every_params == every_params - 1:
