@@ -1,0 +1,28 @@
+"""``uav_fusion demo`` end to end on a short flight: report written, live equals offline."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from test_graph_flight import write_flight
+
+from uav_fusion.cli import main
+
+
+def test_demo_writes_the_report_and_matches_offline(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    flight = write_flight(tmp_path / "flight", seconds=20.0)
+    out = tmp_path / "demo"
+    code = main(["demo", "--flight", str(flight), "--out", str(out), "--no-figures", "--quiet"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert (out / "report.md").is_file() and (out / "metrics.csv").is_file()
+    assert "KF fused track, all steps (3D)" in text
+    assert "equals the offline run's" in text
+
+
+def test_demo_refuses_a_missing_flight(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--flight", str(tmp_path / "nope")]) == 2
+    assert "flight folder not found" in capsys.readouterr().err
