@@ -16,7 +16,9 @@ confirms the jump (a real gap in the data: both are then processed) or contradic
 lone bad stamp: dropped as ``<source>_future``), so one bad stamp cannot drag the reorder
 watermark ahead and make every later message "late". A backwards jump of the simulated clock
 by more than ``clock_jump_back_s`` (a bag loop) processes what is buffered, resets the filter
-and the reorder buffer, logs a warning and counts ``clock_jumps_back``.
+and the reorder buffer, logs a warning and counts ``clock_jumps_back``. A message equal to
+one of the last ``DUPLICATE_MEMORY`` of its stream (same stamp, same position) is dropped as
+``<source>_duplicate`` (a restarted replay re-sends its file from the start).
 
 Accounting: for each input stream, ``received_<s>`` = ``used_<s>`` + the sum of
 ``rejected_<s>_<reason>`` (refused by the estimator: gates, not selected, failed RF
@@ -60,6 +62,8 @@ from uav_fusion.params import Param, declare_all, not_empty, run_node
 from uav_fusion.replay import stream_qos
 
 NODE_NAME = "fusion_node"
+#: How many recent messages per stream are remembered to recognise exact repeats.
+DUPLICATE_MEMORY = 4096
 
 
 def fusion_params() -> list[Param]:
@@ -128,6 +132,9 @@ class FusionNode(Node):
         self.used: Counter[str] = Counter()
         self.refused: Counter[str] = Counter()  # "<source>_<reason>"
         self._held: dict[str, list[tuple[float, Measurement | None]]] = {RADAR: [], RF: []}
+        # recent (stamp, values) per stream, to drop exact repeats (a restarted replay)
+        self._seen: dict[str, set[tuple[float, ...]]] = {RADAR: set(), RF: set()}
+        self._seen_order: dict[str, deque[tuple[float, ...]]] = {RADAR: deque(), RF: deque()}
         self._last_clock: float | None = None
         self.clock_jumps_back = 0
         self.dropped: Counter[str] = Counter()
@@ -223,7 +230,21 @@ class FusionNode(Node):
 
     # --- stamps far ahead and clock jumps ---------------------------------------------------
     def _admit(self, source: str, t: float, m: Measurement | None) -> None:
-        """Pass a stamp on unless it lies implausibly far ahead (see the module docstring)."""
+        """Pass a stamp on unless it repeats a message or lies implausibly far ahead (see the
+        module docstring)."""
+        key = (t, *(m.z.tolist() if m is not None else ()))
+        seen = self._seen[source]
+        if key in seen:
+            self._count_drop(
+                source, "duplicate",
+                f"{source} message at {t:.3f} repeats one already received: dropped",
+            )
+            return
+        seen.add(key)
+        order = self._seen_order[source]
+        order.append(key)
+        if len(order) > DUPLICATE_MEMORY:
+            seen.discard(order.popleft())
         horizon = float(self.p["max_future_s"])
         clock = self._sim_now()
         ref = self.buffer.watermark if clock is None else max(clock, self.buffer.watermark)
@@ -291,6 +312,9 @@ class FusionNode(Node):
         self.estimator.t = None
         self.estimator.last_used_t = None
         self.buffer = self._new_buffer()
+        for src in self._seen:  # the loop repeats the same messages: they are new again
+            self._seen[src].clear()
+            self._seen_order[src].clear()
         self.clock_jumps_back += 1
         self.get_logger().warning(
             f"simulated clock jumped back {last - now:.3f} s (from {last:.3f} to {now:.3f}; "
