@@ -175,20 +175,23 @@ def test_stamp_far_in_the_past_is_dropped_as_late(ctx: Context) -> None:
 
 
 @pytest.mark.fault("MSG-08")
-def test_duplicate_stamps_radar_one_frame_rf_both_processed(ctx: Context) -> None:
-    """A repeated radar stamp makes a frame of candidates: one updates, the duplicate is
-    refused as ``not_selected``; a repeated RF fix is processed twice (dt = 0) in order."""
+def test_duplicate_stamps_repeats_dropped_distinct_reports_kept(ctx: Context) -> None:
+    """An exact repeat (same stamp, same position) is dropped as ``<source>_duplicate``; two
+    different radar reports sharing a stamp are one frame of candidates (one updates, the
+    other is refused as ``not_selected``)."""
     h = FusionHarness(ctx)
     track(h, T0, T0 + 2.0)
     dup = radar_msg(T0 + 2.0, *straight(T0 + 2.0))
     h.send(dup, dup)
     fix = rf_msg(T0 + 2.1, 317.0, 1.0)
     h.send(fix, fix)
+    e, n, u = straight(T0 + 2.25)
+    h.send(radar_msg(T0 + 2.25, e, n, u), radar_msg(T0 + 2.25, e + 60.0, n + 40.0, u))
     h.settle()
+    assert h.fusion.dropped == {"radar_duplicate": 1, "rf_duplicate": 1}
     d = h.diagnostics()
     assert d["rejected_radar_not_selected"] == "1"
-    assert int(d["used_rf"]) + int(d.get("rejected_rf_nis", "0")) == 2
-    assert not h.fusion.dropped
+    assert int(d["used_rf"]) + int(d.get("rejected_rf_nis", "0")) == 1
     balanced(h)
     h.destroy()
 
