@@ -117,10 +117,11 @@ def _messages(flight_dir: Path) -> tuple[list[tuple[str, Any]], list[tuple[str, 
     return radar, rf
 
 
-def _offline(flight_dir: Path) -> list[tuple[float, np.ndarray, bool]]:
+def _offline(flight_dir: Path) -> list[tuple[float, np.ndarray, bool, bool]]:
+    """(t, x, updated, validated) of every filter step of the offline run."""
     site = load_site()
     res = run_flight(load_flight(flight_dir, site), load_profile("paper"), site)
-    return [(s.t, s.x, s.updated) for s in res.steps if s.updated or s.coasted]
+    return [(s.t, s.x, s.updated, s.validated) for s in res.steps if s.updated or s.coasted]
 
 
 def _feed(h: Harness, order: list[tuple[str, Any]]) -> None:
@@ -166,7 +167,8 @@ def test_late_rf_is_reordered_and_output_equals_offline(
     assert np.max(np.abs(np.array([g.x for g in got]) - np.array([e[1] for e in expected]))) < 1e-9
     n_upd = sum(1 for e in expected if e[2])
     h.spin_until(lambda: len(h.updated) == n_upd and len(h.coasted) == len(expected) - n_upd)
-    h.spin_until(lambda: len(h.acc_radar) + len(h.acc_rf) == n_upd)
+    n_valid = sum(1 for e in expected if e[3])  # track starts are not "accepted"
+    h.spin_until(lambda: len(h.acc_radar) + len(h.acc_rf) == n_valid)
     assert len(h.acc_rf) > 0 and len(h.coasted) > 0  # both paths exercised
     assert not h.fusion.dropped
     h.destroy()
@@ -221,8 +223,9 @@ def test_frame_candidates_with_one_stamp_are_processed_as_one_frame(ctx: Context
         h.pub_radar.publish(cv.radar_measurement_to_msg(m, FRAME))
     h.spin_until(lambda: h.fusion.received[RADAR] == 3)
     h.flush()
-    h.spin_until(lambda: len(h.odom) == 2 and len(h.acc_radar) == 2)
-    assert h.acc_radar[1].pose.pose.position.x == 301.0
+    # the first report starts the track (an update, not an accepted measurement)
+    h.spin_until(lambda: len(h.odom) == 2 and len(h.updated) == 2 and len(h.acc_radar) == 1)
+    assert h.acc_radar[0].pose.pose.position.x == 301.0
     assert h.fusion.statuses["discarded"] == 1
     h.destroy()
 
