@@ -113,14 +113,14 @@ def test_separate_processes_equal_the_offline_run(ctx: Context, tmp_path: Path) 
         assert _spin_until(
             ex,
             lambda: (
-                node.count_publishers("radar/pose") == 1
-                and node.count_publishers("rf/fix") == 1
+                node.count_publishers("radar/pose") >= 1
+                and node.count_publishers("rf/fix") >= 1
                 and node.count_subscribers("radar/pose") >= 1
                 and node.count_subscribers("rf/fix") >= 1
-                and node.count_publishers("fusion/odom") == 1
+                and node.count_publishers("fusion/odom") >= 1
             ),
             60.0,
-        ), "processes did not come up"
+        ), "processes did not come up:\n" + "\n".join(procs.log(n) for n in procs.procs)
         procs.start("truth_replay", fd, "rate:=5.0", "wait_for_clock_subscribers:=3")
         ok = _spin_until(ex, lambda: len(odom) >= len(offline), 120.0)
         assert ok, f"got {len(odom)} of {len(offline)} steps; fusion log:\n" + procs.log(
