@@ -54,6 +54,8 @@ class GraphResult:
     report: str | None = None
     wall_s: float = 0.0
     message: str = ""
+    #: messages published but never received, by "<subscriber node>: <stream>" (transport loss)
+    lost: dict[str, int] = field(default_factory=dict)
 
 
 def _params(values: dict[str, Any] | None) -> list[Parameter]:
@@ -101,6 +103,9 @@ class Graph:
         self.replays = [self.truth, self.rf, self.radar]
         tp = self.truth.p
         self.rate = float(tp["rate"])
+        self._lost_offset = (0, 0)  # messages declared lost (fusion, evaluator)
+        self._stall: tuple[tuple[int, int], float] | None = None
+        self.loss_detected = False
         self.driver = ReplayDriver(
             self.truth,
             rate=self.rate,
@@ -147,8 +152,7 @@ class Graph:
         return self.driver.published_to(self.radar.pub) + self.driver.published_to(self.rf.pub)
 
     def fusion_caught_up(self) -> bool:
-        f = self.fusion
-        return f.received[RADAR] + f.received[RF] >= self.fusion_inputs_published()
+        return self._fusion_count() + self._lost_offset[0] >= self.fusion_inputs_published()
 
     def evaluator_expected(self) -> int:
         f = self.fusion
@@ -160,11 +164,33 @@ class Graph:
     def evaluator_caught_up(self) -> bool:
         if self.evaluator is None:
             return True
-        return int(sum(self.evaluator.received.values())) >= self.evaluator_expected()
+        return self._evaluator_count() + self._lost_offset[1] >= self.evaluator_expected()
 
     def drained(self) -> bool:
-        """Have the consumers taken every message published so far?"""
-        return self.fusion_caught_up() and self.evaluator_caught_up()
+        """Have the consumers taken every message published so far?
+
+        If they stop receiving for STALL_S while messages are missing, those messages were
+        lost in transport (a queue overwrote them): the loss is recorded (see
+        :meth:`lost_messages`, :attr:`GraphResult.lost`) and the replay goes on at its rate
+        without waiting for the consumers any more.
+        """
+        if self.loss_detected or (self.fusion_caught_up() and self.evaluator_caught_up()):
+            self._stall = None
+            return True
+        now = time.monotonic()
+        n = (self._fusion_count(), self._evaluator_count())
+        if self._stall is None or self._stall[0] != n:
+            self._stall = (n, now)
+            return False
+        if now - self._stall[1] <= self.STALL_S:
+            return False
+        self._lost_offset = (
+            max(0, self.fusion_inputs_published() - n[0]),
+            max(0, self.evaluator_expected() - n[1]),
+        )
+        self.loss_detected = True
+        self._stall = None
+        return True
 
     # --- running --------------------------------------------------------------------------
     def spin_until(self, cond: Callable[[], bool], timeout_s: float) -> bool:
@@ -181,15 +207,18 @@ class Graph:
         self.driver.start()
         end = t0 + timeout_s
         res = GraphResult(ok=False)
-        if not self.spin_until(lambda: self.driver.done and self.fusion_caught_up(), timeout_s):
+        if not self.spin_until(lambda: self.driver.done, timeout_s):
             res.message = (
                 f"replay did not finish in {timeout_s:g} s ({self.driver.remaining} left)"
             )
             return res
+        if not self._until_caught_up(self.fusion_caught_up, self._fusion_count, end):
+            return self._lost(res, "fusion_node")
         self.fusion.flush()
-        if not self.spin_until(self.evaluator_caught_up, max(1.0, end - time.monotonic())):
-            res.message = "the evaluator did not receive every message"
-            return res
+        if not self._until_caught_up(self.evaluator_caught_up, self._evaluator_count, end):
+            return self._lost(res, "evaluator_node")
+        if self.loss_detected or self.lost_messages():
+            return self._lost(res, "detected while replaying")
         res.ok = True
         res.steps = self.fusion.steps_published
         res.published = {n.get_name(): self.published(n.get_name()) for n in self.replays}
@@ -197,6 +226,62 @@ class Graph:
             files = self.evaluator.write_report()
             res.report = str(files.folder)
         res.wall_s = time.monotonic() - t0
+        return res
+
+    #: wall seconds without a single new message after which missing messages count as lost
+    STALL_S = 2.0
+
+    def _fusion_count(self) -> int:
+        return int(sum(self.fusion.received.values()))
+
+    def _evaluator_count(self) -> int:
+        return 0 if self.evaluator is None else int(sum(self.evaluator.received.values()))
+
+    def _until_caught_up(
+        self, caught_up: Callable[[], bool], count: Callable[[], int], end: float
+    ) -> bool:
+        """Spin until ``caught_up``; False once nothing new arrived for STALL_S or at ``end``."""
+        last, since = count(), time.monotonic()
+        while not caught_up():
+            now = time.monotonic()
+            if now > end or not self.context.ok():
+                return False
+            n = count()
+            if n != last:
+                last, since = n, now
+            elif now - since > self.STALL_S:
+                return False
+            self.executor.spin_once(timeout_sec=0.02)
+        return True
+
+    def lost_messages(self) -> dict[str, int]:
+        """Published minus received, per subscriber and stream (nonzero entries only)."""
+        f = self.fusion
+        pairs = [
+            ("fusion_node: radar", self.driver.published_to(self.radar.pub), f.received[RADAR]),
+            ("fusion_node: rf", self.driver.published_to(self.rf.pub), f.received[RF]),
+        ]
+        ev = self.evaluator
+        if ev is not None:
+            got = ev.received
+            pairs += [
+                ("evaluator_node: truth", self.published("truth_replay"), got[ev.truth_topic]),
+                ("evaluator_node: rf", self.driver.published_to(self.rf.pub), got[ev.rf_topic]),
+            ]
+            if self.radar.pub_raw is not None:
+                sent = self.driver.published_to(self.radar.pub_raw)
+                pairs.append(("evaluator_node: radar raw", sent, got[ev.radar_raw_topic]))
+        return {k: int(a - b) for k, a, b in pairs if a > b}
+
+    def _lost(self, res: GraphResult, who: str) -> GraphResult:
+        res.lost = self.lost_messages()
+        res.steps = self.fusion.steps_published
+        res.published = {n.get_name(): self.published(n.get_name()) for n in self.replays}
+        parts = ", ".join(f"{k} {v}" for k, v in sorted(res.lost.items())) or "none counted"
+        res.message = (
+            f"messages were lost in transport ({who} stopped receiving): {parts}; the "
+            "publishing rate is beyond what the graph accepts (use a lower rate or rate 0)"
+        )
         return res
 
     def destroy(self) -> None:
