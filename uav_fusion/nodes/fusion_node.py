@@ -16,7 +16,9 @@ confirms the jump (a real gap in the data: both are then processed) or contradic
 lone bad stamp: dropped as ``<source>_future``), so one bad stamp cannot drag the reorder
 watermark ahead and make every later message "late". A backwards jump of the simulated clock
 by more than ``clock_jump_back_s`` (a bag loop) processes what is buffered, resets the filter
-and the reorder buffer, logs a warning and counts ``clock_jumps_back``. A message equal to
+and the reorder buffer, logs a warning and counts ``clock_jumps_back``; ``late_run_reset``
+messages in a row that are too late for the window do the same without a clock (counted as
+``timeline_resets``). A message equal to
 one of the last ``DUPLICATE_MEMORY`` of its stream (same stamp, same position) is dropped as
 ``<source>_duplicate`` (a restarted replay re-sends its file from the start).
 
@@ -109,6 +111,12 @@ def fusion_params() -> list[Param]:
             lo=0.001, hi=1.0e9,
         ),
         Param(
+            "late_run_reset", 50,
+            "this many messages in a row later than the reorder window mean the input timeline "
+            "went back: reset the filter and the buffer (0 = never)",
+            lo=0, hi=1000000,
+        ),
+        Param(
             "clock_jump_back_s", 1.0,
             "a backwards jump of the simulated clock larger than this resets the filter",
             lo=0.0, hi=1.0e9,
@@ -137,6 +145,8 @@ class FusionNode(Node):
         self._seen_order: dict[str, deque[tuple[float, ...]]] = {RADAR: deque(), RF: deque()}
         self._last_clock: float | None = None
         self.clock_jumps_back = 0
+        self.timeline_resets = 0
+        self._late_run = 0
         self.dropped: Counter[str] = Counter()
         self.statuses: Counter[str] = Counter()
         self.reasons: Counter[str] = Counter()
@@ -302,25 +312,31 @@ class FusionNode(Node):
         self._last_clock = now
         if last is None or last - now <= float(self.p["clock_jump_back_s"]):
             return
-        n = self.buffer.pending
-        self._process(self.buffer.flush())
-        for src, held in self._held.items():
-            if held:
-                self._drop_held(src)
-        self.estimator.reset("clock_jump_back")
-        # time starts again: forget the old timeline so earlier stamps are not "out of order"
-        self.estimator.t = None
-        self.estimator.last_used_t = None
-        self.buffer = self._new_buffer()
-        for src in self._seen:  # the loop repeats the same messages: they are new again
-            self._seen[src].clear()
-            self._seen_order[src].clear()
         self.clock_jumps_back += 1
+        n = self._restart_timeline("clock_jump_back")
         self.get_logger().warning(
             f"simulated clock jumped back {last - now:.3f} s (from {last:.3f} to {now:.3f}; "
             f"a bag loop?): processed {n} buffered measurement(s) of the old timeline, "
             "reset the filter and the reorder buffer"
         )
+
+    def _restart_timeline(self, reason: str) -> int:
+        """Finish the old timeline and start a new one; returns the items processed."""
+        n = self.buffer.pending
+        self._process(self.buffer.flush())
+        for src, held in self._held.items():
+            if held:
+                self._drop_held(src)
+        self.estimator.reset(reason)
+        # time starts again: forget the old timeline so earlier stamps are not "out of order"
+        self.estimator.t = None
+        self.estimator.last_used_t = None
+        self.buffer = self._new_buffer()
+        for src in self._seen:  # a loop repeats the same messages: they are new again
+            self._seen[src].clear()
+            self._seen_order[src].clear()
+        self._late_run = 0
+        return n
 
     def _push(self, m: Measurement) -> None:
         if not self.buffer.push(m.source, m.t, m):
@@ -331,7 +347,19 @@ class FusionNode(Node):
                     f"processed (reorder window {self.buffer.window_s:g} s): dropped"
                 )
             self.dropped[key] += 1
+            self._late_run += 1
+            limit = int(self.p["late_run_reset"])
+            if limit and self._late_run >= limit:
+                self.timeline_resets += 1
+                n = self._restart_timeline("timeline_back")
+                self.get_logger().warning(
+                    f"{limit} messages in a row arrived later than the reorder window: the "
+                    "input timeline went back (a bag loop without /clock, or an earlier jump "
+                    f"ahead that was wrong); processed {n} buffered measurement(s), reset the "
+                    "filter and the reorder buffer"
+                )
             return
+        self._late_run = 0
         self._process(self.buffer.release(self._sim_now()))
 
     def _sim_now(self) -> float | None:
@@ -451,6 +479,7 @@ class FusionNode(Node):
         vals["buffer_pending"] = self.buffer.pending
         vals["buffer_max_depth"] = self.buffer.max_depth
         vals["clock_jumps_back"] = self.clock_jumps_back
+        vals["timeline_resets"] = self.timeline_resets
         return {k: str(v) for k, v in vals.items()}
 
     def publish_diagnostics(self) -> None:
