@@ -17,8 +17,8 @@ lone bad stamp: dropped as ``<source>_future``), so one bad stamp cannot drag th
 watermark ahead and make every later message "late". A backwards jump of the simulated clock
 by more than ``clock_jump_back_s`` (a bag loop) processes what is buffered, resets the filter
 and the reorder buffer, logs a warning and counts ``clock_jumps_back``; ``late_run_reset``
-messages in a row that are too late for the window do the same without a clock (counted as
-``timeline_resets``). A message equal to
+messages in a row that are too late for the window or repeats do the same without a clock
+(counted as ``timeline_resets``). A message equal to
 one of the last ``DUPLICATE_MEMORY`` of its stream (same stamp, same position) is dropped as
 ``<source>_duplicate`` (a restarted replay re-sends its file from the start).
 
@@ -112,8 +112,8 @@ def fusion_params() -> list[Param]:
         ),
         Param(
             "late_run_reset", 50,
-            "this many messages in a row later than the reorder window mean the input timeline "
-            "went back: reset the filter and the buffer (0 = never)",
+            "this many messages in a row that are late for the reorder window or repeats mean "
+            "the input timeline went back: reset the filter and the buffer (0 = never)",
             lo=0, hi=1000000,
         ),
         Param(
@@ -249,6 +249,7 @@ class FusionNode(Node):
                 source, "duplicate",
                 f"{source} message at {t:.3f} repeats one already received: dropped",
             )
+            self._note_stale()
             return
         seen.add(key)
         order = self._seen_order[source]
@@ -347,20 +348,25 @@ class FusionNode(Node):
                     f"processed (reorder window {self.buffer.window_s:g} s): dropped"
                 )
             self.dropped[key] += 1
-            self._late_run += 1
-            limit = int(self.p["late_run_reset"])
-            if limit and self._late_run >= limit:
-                self.timeline_resets += 1
-                n = self._restart_timeline("timeline_back")
-                self.get_logger().warning(
-                    f"{limit} messages in a row arrived later than the reorder window: the "
-                    "input timeline went back (a bag loop without /clock, or an earlier jump "
-                    f"ahead that was wrong); processed {n} buffered measurement(s), reset the "
-                    "filter and the reorder buffer"
-                )
+            self._note_stale()
             return
         self._late_run = 0
         self._process(self.buffer.release(self._sim_now()))
+
+    def _note_stale(self) -> None:
+        """One more message in a row that was late or a repeat; a long run of them means
+        the input timeline went back: start a new one."""
+        self._late_run += 1
+        limit = int(self.p["late_run_reset"])
+        if limit and self._late_run >= limit:
+            self.timeline_resets += 1
+            n = self._restart_timeline("timeline_back")
+            self.get_logger().warning(
+                f"{limit} messages in a row were late for the reorder window or repeats: the "
+                "input timeline went back (a bag loop without /clock, or an earlier jump "
+                f"ahead that was wrong); processed {n} buffered measurement(s), reset the "
+                "filter and the reorder buffer"
+            )
 
     def _sim_now(self) -> float | None:
         if not self.get_parameter("use_sim_time").value:
