@@ -145,3 +145,28 @@ def test_sim_time_zero_before_the_first_clock_message(ctx: Context) -> None:
     assert h.fusion.buffer.pending == 0 and not h.fusion.dropped
     assert h.fusion.diagnostics()["used_radar"] == "12"
     h.destroy()
+
+
+@pytest.mark.fault("TIME-06")
+def test_timeline_going_back_without_a_clock_resets_after_a_run_of_stale_messages(
+    ctx: Context, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """A bag looped without /clock: the second pass repeats the first. The first
+    ``late_run_reset`` messages of the repeat are dropped (counted as duplicates), then the
+    node concludes the timeline went back, resets and fuses the rest of the repeat."""
+    h = FusionHarness(ctx, late_run_reset=10)
+    msgs = radar_track(T0, T0 + 10.0)
+    for k in range(0, 40, 4):
+        h.send(*msgs[k : k + 4])
+    h.settle()
+    for k in range(0, 40, 4):
+        h.send(*msgs[k : k + 4])
+    h.settle()
+    d = h.diagnostics()
+    assert d["timeline_resets"] == "1" and d["estimator_reinit_timeline_back"] == "1"
+    assert h.fusion.dropped == {"radar_duplicate": 10}
+    assert int(d["used_radar"]) == 40 + 30
+    assert "the input timeline went back" in capfd.readouterr().err
+    rec, used, rej, drop = accounting(d, RADAR)
+    assert rec == used + rej + drop == 80
+    h.destroy()
