@@ -26,3 +26,18 @@ def test_demo_writes_the_report_and_matches_offline(
 def test_demo_refuses_a_missing_flight(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["demo", "--flight", str(tmp_path / "nope")]) == 2
     assert "flight folder not found" in capsys.readouterr().err
+
+
+def test_demo_from_a_bag_equals_the_offline_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    flight = write_flight(tmp_path / "flight", seconds=20.0)
+    bag = tmp_path / "bag"
+    assert main(["convert", str(flight), "--out", str(bag)]) == 0
+    out = tmp_path / "demo"
+    args = ["demo", "--bag", str(bag), "--flight", str(flight), "--rate", "10"]
+    code = main([*args, "--out", str(out), "--no-figures", "--quiet"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert (out / "report.md").is_file()
+    assert "equals the offline run's" in text

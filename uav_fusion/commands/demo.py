@@ -48,6 +48,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="fusion node's reorder window in sensor seconds (default: 2)",
     )
+    parser.add_argument(
+        "--bag",
+        metavar="PATH",
+        help="play this rosbag2 bag (bag_player) instead of replaying a flight folder; the "
+        "offline comparison then needs --flight (the folder the bag was made from)",
+    )
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
     parser.add_argument("--no-check", action="store_true", help="skip the offline comparison")
     parser.add_argument(
@@ -90,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
+    if args.bag:
+        return _run_bag(args, flight_dir, out)
 
     import rclpy
     from rclpy.context import Context
@@ -136,6 +144,106 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"demo: report written to {res.report}")
     if not args.no_check:
+        return _compare_offline(args, flight_dir, live)
+    return 0
+
+
+def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
+    """The fusion and evaluator nodes fed by bag_player (bag time drives /clock)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.impl.logging_severity import LoggingSeverity
+    from rclpy.logging import set_logger_level
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from uav_fusion.core.evaluation import format_table
+    from uav_fusion.nodes.bag_player import BagPlayer
+    from uav_fusion.nodes.evaluator_node import EvaluatorNode
+    from uav_fusion.nodes.fusion_node import FusionNode
+
+    rate = args.rate if args.rate > 0 else 20.0  # the player paces by bag time: rate > 0
+    ov = _overrides(args, flight_dir, out)
+
+    def params(name: str) -> list[Parameter]:
+        return [Parameter(k, value=v) for k, v in ov[name].items()]
+
+    ctx = Context()
+    rclpy.init(context=ctx, args=[])
+    nodes: list[Node] = []
+    try:
+        fusion = FusionNode(context=ctx, parameter_overrides=params("fusion_node"))
+        nodes.append(fusion)
+        evaluator = EvaluatorNode(context=ctx, parameter_overrides=params("evaluator_node"))
+        nodes.append(evaluator)
+        player = BagPlayer(
+            bag=args.bag, context=ctx, parameter_overrides=[Parameter("rate", value=rate)]
+        )
+        nodes.append(player)
+        if args.quiet:
+            for n in nodes:
+                set_logger_level(n.get_logger().name, LoggingSeverity.WARN)
+        ex = SingleThreadedExecutor(context=ctx)
+        for n in nodes:
+            ex.add_node(n)
+        print(f"demo: playing {args.bag} at {rate:g}x", flush=True)
+        t0 = time.monotonic()
+        player.start()
+        end = t0 + args.timeout
+
+        def spin_until(cond: Any) -> bool:
+            last, since = -1, time.monotonic()
+            while not cond():
+                now = time.monotonic()
+                n = sum(fusion.received.values()) + sum(evaluator.received.values())
+                if n != last:
+                    last, since = n, now
+                if now > end or (player.finished.is_set() and now - since > 5.0):
+                    return False
+                ex.spin_once(timeout_sec=0.02)
+            return True
+
+        played = player.played
+        to_fusion = ("/radar/pose", "/rf/fix")
+        ok = spin_until(
+            lambda: (
+                player.finished.is_set()
+                and sum(fusion.received.values()) >= sum(played[t] for t in to_fusion)
+            )
+        )
+        fusion.flush()
+        expected = sum(played.values()) - sum(played[t] for t in ("/radar/pose", "/clock"))
+        ok = ok and spin_until(
+            lambda: (
+                sum(evaluator.received.values())
+                >= expected + fusion.steps_published + fusion.accepted_published
+            )
+        )
+        if getattr(player, "error", None):
+            print(f"demo: bag_player: {player.error}", file=sys.stderr)
+            return 1
+        if not ok:
+            print("demo: not every message of the bag arrived", file=sys.stderr)
+            return 1
+        wall = time.monotonic() - t0
+        live = evaluator.evaluate()
+        files = evaluator.write_report()
+        steps = fusion.steps_published
+        dropped = dict(fusion.dropped)
+    finally:
+        for n in reversed(nodes):
+            n.destroy_node()
+        rclpy.shutdown(context=ctx)
+    print()
+    print(format_table(live))
+    print()
+    print(
+        f"demo: {sum(played.values())} messages played in {wall:.1f} s wall; {steps} filter "
+        f"steps; fusion drops: {dropped or 'none'}"
+    )
+    print(f"demo: report written to {files.folder}")
+    if args.flight and not args.no_check:
         return _compare_offline(args, flight_dir, live)
     return 0
 
