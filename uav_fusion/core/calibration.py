@@ -10,8 +10,9 @@ Definitions (all errors against truth linearly interpolated at the measurement t
 - radar error is 3D (east, north, up); RF error is 2D (east, north);
 - the UAV's radar reports are the reports of the tracks whose mean UAV class probability
   (``catProb[0]``) over the whole track is at least ``uav_prob_threshold`` (0.5 by default); a
-  track without class probabilities counts as the UAV's. Bird and clutter tracks are counted
-  separately and never scored. Coverage is count-based: scored reports / UAV reports;
+  track without class probabilities counts as the UAV's (:mod:`uav_fusion.core.radar_class`,
+  the same rule as the raw radar row of ``uav_fusion evaluate``). Bird and clutter tracks are
+  counted separately and never scored. Coverage is count-based: scored reports / UAV reports;
 - RF coverage is fixes / attempts (a failed attempt, latitude = longitude = 0, is an attempt);
 - distance bins use the 3D distance from the radar to the truth position at the report time;
 - the RF north/south split is by the truth north coordinate at each attempt's time, against the
@@ -22,12 +23,12 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections import defaultdict
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
+from uav_fusion.core import radar_class
 from uav_fusion.core.metrics import ErrorStats, error_stats, interpolate_truth, position_errors
 from uav_fusion.core.records import Flight
 
@@ -77,16 +78,9 @@ class CalibrationResult:
 
 
 def uav_track_ids(flight: Flight, threshold: float = 0.5) -> tuple[set[int], set[int]]:
-    """(UAV track ids, other track ids) by each track's mean ``catProb[0]``."""
-    probs: dict[int, list[float]] = defaultdict(list)
-    seen: set[int] = set()
-    for fr in flight.radar:
-        for tr in fr.tracks:
-            seen.add(tr.track_id)
-            if tr.uav_prob is not None and math.isfinite(tr.uav_prob):
-                probs[tr.track_id].append(tr.uav_prob)
-    uav = {i for i in seen if not probs.get(i) or float(np.mean(probs[i])) >= threshold}
-    return uav, seen - uav
+    """(UAV track ids, other track ids) by each track's mean ``catProb[0]``
+    (:func:`uav_fusion.core.radar_class.uav_track_ids`, the rule of the raw radar row)."""
+    return radar_class.uav_track_ids(flight.radar, threshold)
 
 
 def calibrate(

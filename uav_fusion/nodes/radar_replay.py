@@ -7,9 +7,10 @@ Two streams (see ``docs/graph.md``):
   (:func:`uav_fusion.core.estimator.flight_measurements`); with the paper's policy
   (``largest_track``) that is the largest continuous track, chosen with knowledge of the
   whole flight like the paper did. Candidates of one radar frame share one stamp.
-- ``radar/raw``: every UAV-class report of every frame, before selection (the evaluator's
-  "radar raw" row). UAV-class means ``catProb[0] >= min_uav_prob`` of the profile, or every
-  report when the profile sets no threshold.
+- ``radar/raw``: every UAV report of every frame, before selection (the evaluator's
+  "radar raw" row): the reports of the tracks whose mean ``catProb[0]`` reaches the profile's
+  ``evaluation.raw_radar_min_mean_uav_prob`` (:mod:`uav_fusion.core.radar_class`; every
+  report when that is null).
 
 Covariance: the measurement's own R, else the profile's radar R. Stamps: the radar frame's
 UTC time. Parameters: :func:`uav_fusion.replay.replay_params` plus ``profile``,
@@ -28,6 +29,7 @@ from rclpy.publisher import Publisher
 from uav_fusion import conversions as cv
 from uav_fusion.core.estimator import Profile, flight_measurements, load_profile
 from uav_fusion.core.estimator.profile import SELECTIONS
+from uav_fusion.core.radar_class import uav_class_tracks
 from uav_fusion.core.records import RADAR, Flight, Measurement, RadarTrack
 from uav_fusion.core.site import Site
 from uav_fusion.params import Param
@@ -48,14 +50,8 @@ def selected_radar(flight: Flight, profile: Profile, site: Site) -> list[list[Me
 
 
 def uav_class_reports(flight: Flight, profile: Profile) -> list[RadarTrack]:
-    """Every report whose UAV probability passes the profile's threshold (all if none)."""
-    thr = profile.min_uav_prob
-    return [
-        trk
-        for frame in flight.radar
-        for trk in frame.tracks
-        if thr is None or (trk.uav_prob is not None and trk.uav_prob >= thr)
-    ]
+    """The UAV reports of the raw radar row (the profile's per-track mean rule)."""
+    return uav_class_tracks(flight.radar, profile.raw_radar_min_mean_uav_prob)
 
 
 class RadarReplay(ReplayNode):

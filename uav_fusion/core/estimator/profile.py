@@ -46,7 +46,10 @@ class Profile:
     max_consecutive_rejections: int | None = None
     max_coast_s: float | None = None
     tentative_sources: tuple[str, ...] = ()
-    tentative_max_rejections: int = 1
+    confirm_m: int = 1  # a tentative track is confirmed by confirm_m hits ...
+    confirm_n: int = 1  # ... among its first confirm_n measurements (the start included)
+    max_speed_mps: float | None = None  # speed plausibility bound while tentative
+    raw_radar_min_mean_uav_prob: float | None = 0.5  # the raw radar row's UAV-track rule
     description: str = ""
     r_note: str = ""
     source: Path | None = field(default=None, compare=False)
@@ -83,8 +86,11 @@ class Profile:
                 "max_consecutive_rejections": self.max_consecutive_rejections,
                 "max_coast_s": self.max_coast_s,
                 "tentative_sources": list(self.tentative_sources),
-                "tentative_max_rejections": self.tentative_max_rejections,
+                "confirm_m": self.confirm_m,
+                "confirm_n": self.confirm_n,
+                "max_speed_mps": self.max_speed_mps,
             },
+            "evaluation": {"raw_radar_min_mean_uav_prob": self.raw_radar_min_mean_uav_prob},
         }
 
 
@@ -98,6 +104,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
         "radar_selection",
         "sources",
         "track",
+        "evaluation",
     ),
     "motion": ("model", "q"),
     "measurement": ("radar", "rf", "note"),
@@ -111,10 +118,13 @@ _KEYS: dict[str, tuple[str, ...]] = {
         "rf_init_altitude_m",
         "rf_init_altitude_std_m",
         "tentative_sources",
-        "tentative_max_rejections",
+        "confirm_m",
+        "confirm_n",
+        "max_speed_mps",
         "max_consecutive_rejections",
         "max_coast_s",
     ),
+    "evaluation": ("raw_radar_min_mean_uav_prob",),
 }
 
 
@@ -188,8 +198,18 @@ def _validate(p: Profile, where: str) -> None:
         for src in srcs:
             if src not in SOURCES:
                 raise ConfigError(f"{where}: track.{key}: unknown source {src!r}")
-    if p.tentative_max_rejections < 1:
-        raise ConfigError(f"{where}: track.tentative_max_rejections must be >= 1")
+    if not 1 <= p.confirm_m <= p.confirm_n:
+        raise ConfigError(
+            f"{where}: track.confirm_m and confirm_n need 1 <= confirm_m <= confirm_n, "
+            f"got {p.confirm_m} and {p.confirm_n}"
+        )
+    if p.max_speed_mps is not None and not p.max_speed_mps > 0:
+        raise ConfigError(f"{where}: track.max_speed_mps must be > 0 or null")
+    raw = p.raw_radar_min_mean_uav_prob
+    if raw is not None and not 0 <= raw <= 1:
+        raise ConfigError(
+            f"{where}: evaluation.raw_radar_min_mean_uav_prob must lie in [0, 1] or be null"
+        )
     if not p.init_velocity_std_mps > 0 or not p.rf_init_altitude_std_m > 0:
         raise ConfigError(f"{where}: track initial standard deviations must be > 0")
     max_rej = p.max_consecutive_rejections
@@ -225,6 +245,7 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     gating = _section(doc, "gating", where)
     sources = _section(doc, "sources", where)
     track = _section(doc, "track", where)
+    evaluation = _section(doc, "evaluation", where)
     for name, sec in (
         ("motion", motion),
         ("measurement", meas),
@@ -233,15 +254,19 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         ("gating", gating),
         ("sources", sources),
         ("track", track),
+        ("evaluation", evaluation),
     ):
         _check_keys(sec, name, where)
     init_sources = track.get("init_sources", [RADAR, RF])
     tentative = track.get("tentative_sources", []) or []
     if not isinstance(init_sources, list) or not isinstance(tentative, list):
         raise ConfigError(f"{where}: track.init_sources / tentative_sources must be lists")
-    tent_max = track.get("tentative_max_rejections", 1)
-    if not isinstance(tent_max, int) or isinstance(tent_max, bool):
-        raise ConfigError(f"{where}: track.tentative_max_rejections must be an integer")
+    confirm = {}
+    for key in ("confirm_m", "confirm_n"):
+        v = track.get(key, 1)
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise ConfigError(f"{where}: track.{key} must be an integer, got {v!r}")
+        confirm[key] = v
     max_rej = track.get("max_consecutive_rejections")
     if max_rej is not None and (not isinstance(max_rej, int) or isinstance(max_rej, bool)):
         raise ConfigError(f"{where}: track.max_consecutive_rejections must be an integer or null")
@@ -264,7 +289,12 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         max_consecutive_rejections=max_rej,
         max_coast_s=_opt_float(track, "max_coast_s", f"{where}: track", None),
         tentative_sources=tuple(str(x) for x in tentative),
-        tentative_max_rejections=tent_max,
+        confirm_m=confirm["confirm_m"],
+        confirm_n=confirm["confirm_n"],
+        max_speed_mps=_opt_float(track, "max_speed_mps", f"{where}: track", None),
+        raw_radar_min_mean_uav_prob=_opt_float(
+            evaluation, "raw_radar_min_mean_uav_prob", f"{where}: evaluation", 0.5
+        ),
         description=str(doc.get("description", "") or ""),
         r_note=str(meas.get("note", "") or ""),
         source=source,

@@ -12,22 +12,33 @@ For each measurement, in the order given (callers sort by time, then ``seq``):
 5. NIS gate at the profile's chi-square probability for the measurement's dimension:
    accepted -> Joseph-form update; rejected -> coast (the prediction is the estimate);
 6. after ``max_consecutive_rejections`` NIS rejections in a row the track is restarted from
-   the measurement that hit the limit. A track started from a source listed in
-   ``tentative_sources`` (RF fixes, whose errors are heavy-tailed) is tentative until its
-   first accepted update and restarts after ``tentative_max_rejections`` rejections.
+   the measurement that hit the limit.
+
+Track confirmation (M-of-N). A track started from a source listed in ``tentative_sources``
+(RF fixes, whose errors are heavy-tailed) is *tentative*: it is confirmed once ``confirm_m``
+of its first ``confirm_n`` measurements (the one that started it included) were hits. A hit
+passes the NIS gate and, while the track is tentative, also the speed plausibility bound: the
+horizontal distance from the last hit divided by the time since it must not exceed
+``max_speed_mps``. When the track can no longer reach ``confirm_m`` hits it is dropped and the
+measurement that made it fail starts a new tentative track. A measurement of a source not in
+``tentative_sources`` (radar) decides at once: a hit confirms the track, a miss supersedes it
+(the tentative track is dropped and the report starts a confirmed track). A tentative track's
+estimates are not published as filter estimates: its steps have status ``tentative``.
 
 Every measurement yields exactly one :class:`Step`. Statuses:
 
-* ``initialised`` / ``reset``: the track (re)started from this measurement (``reset`` when a
-  previous track was dropped; ``reason`` says why);
+* ``initialised`` / ``reset``: a confirmed track (re)started from this measurement
+  (``reset`` when a previous track was dropped; ``reason`` says why);
 * ``updated``: accepted and fused;
 * ``coasted``: rejected by the NIS gate; the estimate is the prediction;
+* ``tentative``: the measurement started a tentative track (``reason`` ``start``) or was
+  tested against one (``hit``, or the miss's ``nis`` / ``speed``); not a filter estimate;
 * ``discarded``: not a filter step at all (``range_gate``, ``class_prob``, ``not_selected``,
   ``out_of_order``, ``no_track``, ``invalid``); the track is not changed.
 
-The paper's "KF all steps" are the non-discarded steps; its "updated estimates" the steps
-that used their measurement (updated, initialised, reset) and its "coasted estimates" the
-coasted steps.
+The paper's "KF all steps" are the steps that are neither discarded nor tentative; its
+"updated estimates" the steps that used their measurement (updated, initialised, reset) and its
+"coasted estimates" the coasted steps. The step that confirms a tentative track is ``updated``.
 """
 
 from __future__ import annotations
@@ -51,7 +62,9 @@ COASTED = "coasted"
 INITIALISED = "initialised"
 RESET = "reset"
 DISCARDED = "discarded"
-STATUSES = (UPDATED, COASTED, INITIALISED, RESET, DISCARDED)
+TENTATIVE = "tentative"
+STATUSES = (UPDATED, COASTED, INITIALISED, RESET, TENTATIVE, DISCARDED)
+NOT_COUNTED = frozenset((DISCARDED, TENTATIVE))
 USED = frozenset((UPDATED, INITIALISED, RESET))
 
 _DIMS = {RADAR: 3, RF: 2}
@@ -143,8 +156,9 @@ class Step:
 
     @property
     def counted(self) -> bool:
-        """A filter step in the paper's sense (every status except ``discarded``)."""
-        return self.status != DISCARDED
+        """A filter step in the paper's sense: an estimate of a confirmed track (every status
+        except ``discarded`` and ``tentative``)."""
+        return self.status not in NOT_COUNTED
 
     def __repr__(self) -> str:
         nis = "None" if self.nis is None else f"{self.nis:.3f}"
@@ -177,8 +191,13 @@ class FusionEstimator:
         self._max_rej = profile.max_consecutive_rejections
         self._max_coast = profile.max_coast_s
         self._tentative_sources = frozenset(profile.tentative_sources)
-        self._tentative_max = profile.tentative_max_rejections
+        self._confirm_m = profile.confirm_m
+        self._confirm_n = profile.confirm_n
+        self._max_speed = profile.max_speed_mps
         self.tentative = False  # track started from a tentative source, not yet confirmed
+        self._hits = 0  # hits of the tentative track (its start included)
+        self._tested = 0  # measurements tested on the tentative track (its start included)
+        self._last_hit: tuple[float, float, float] = (0.0, 0.0, 0.0)  # t, east, north
         self.t: float | None = None  # time of the current estimate
         self.active = False
         self.last_used_t: float | None = None
@@ -194,6 +213,7 @@ class FusionEstimator:
             self._count("reinitialisations")
             self._pending_reset = reason
         self.active = False
+        self.tentative = False
         self.consecutive_rejections = 0
 
     def state(self) -> tuple[FloatArray, FloatArray] | None:
@@ -214,6 +234,8 @@ class FusionEstimator:
             return [self._initialise(m)]
         kf = self._kf
         r = self._r[m.source] if m.R is None else pack_r(m.R)
+        if self.tentative:
+            return [self._tentative_test(m, z, r)]
         if len(z) == 3:
             g = self._g3
             nis = kf.update3(z[0], z[1], z[2], r, g)
@@ -272,7 +294,12 @@ class FusionEstimator:
                     scored.append((n, m.seq, m, r))
                 scored.sort(key=lambda s: (s[0], s[1]))
                 n0, _, best, r0 = scored[0]
-                if n0 <= self.gate_threshold[best.dim]:
+                if self.tentative:
+                    steps[best.seq] = self._tentative_test(best, zs[best.seq], r0)
+                    hit = steps[best.seq].status != RESET
+                    for n, _, m, _ in scored[1:]:
+                        steps[m.seq] = self._discard(m, "not_selected" if hit else "nis", n)
+                elif n0 <= self.gate_threshold[best.dim]:
                     self._update(best, zs[best.seq], r0)
                     steps[best.seq] = self._used(best, n0)
                     for n, _, m, _ in scored[1:]:
@@ -378,12 +405,58 @@ class FusionEstimator:
         self._count(f"coasted_{m.source}")
         self._count("rejected_nis")
         self.consecutive_rejections += 1
-        n = self._tentative_max if self.tentative else self._max_rej
+        n = self._max_rej
         if n is not None and self.consecutive_rejections >= n:
-            self.reset("tentative" if self.tentative else "max_rejections")
+            self.reset("max_rejections")
             if m.source in self._init_sources:
                 return self._initialise(m, nis)
         return self._snapshot(m, COASTED, "nis", nis)
+
+    def _speed_ok(self, m: Measurement, z: list[float]) -> bool:
+        """Speed plausibility of a measurement against the tentative track's last hit."""
+        vmax = self._max_speed
+        if vmax is None:
+            return True
+        t0, e0, n0 = self._last_hit
+        dist = math.hypot(z[0] - e0, z[1] - n0)
+        dt = m.t - t0
+        return dist <= vmax * dt if dt > 0 else dist == 0.0
+
+    def _tentative_test(self, m: Measurement, z: list[float], r: PackedR) -> Step:
+        """Test a measurement (the track already predicted to its time) against the
+        tentative track: hit or miss, then confirm, go on, supersede or drop (M-of-N)."""
+        kf = self._kf
+        speed_ok = self._speed_ok(m, z)
+        if speed_ok:
+            nis = self._update(m, z, r)
+        else:
+            nis = kf.nis3(z[0], z[1], z[2], r) if len(z) == 3 else kf.nis2(z[0], z[1], r)
+        hit = speed_ok and nis <= (self._g3 if len(z) == 3 else self._g2)
+        confirming = m.source not in self._tentative_sources
+        self._tested += 1
+        if hit:
+            self._hits += 1
+            self._last_hit = (m.t, z[0], z[1])
+            if confirming or self._hits >= self._confirm_m:
+                self._count("confirmed")
+                self._pending_reset = None
+                return self._used(m, nis)  # clears ``tentative``
+            self.last_used_t = m.t
+            self._count("tentative_hits")
+            return self._snapshot(m, TENTATIVE, "hit", nis)
+        reason = "nis" if speed_ok else "speed"
+        self._count(f"tentative_miss_{reason}")
+        if confirming:  # a radar report disagrees: it supersedes the tentative track
+            self.reset("superseded")
+            return self._initialise(m, nis)
+        if self._hits + (self._confirm_n - self._tested) < self._confirm_m:
+            self._count("tentative_dropped")
+            self.active = False
+            self.tentative = False
+            self._pending_reset = "unconfirmed"
+            if m.source in self._init_sources:
+                return self._initialise(m, nis)
+        return self._snapshot(m, TENTATIVE, reason, nis)
 
     def _initialise(self, m: Measurement, nis: float | None = None) -> Step:
         p = self.profile
@@ -403,10 +476,17 @@ class FusionEstimator:
             P[2, 2] = p.rf_init_altitude_std_m**2
         self._kf.set_state(x, P)
         self.active = True
-        self.tentative = m.source in self._tentative_sources
         self.t = m.t
         self.last_used_t = m.t
         self.consecutive_rejections = 0
+        if m.source in self._tentative_sources and self._confirm_m > 1:
+            self.tentative = True
+            self._hits = self._tested = 1
+            self._last_hit = (m.t, float(z[0]), float(z[1]))
+            self._count("tentative_started")
+            self._count(f"tentative_started_{m.source}")
+            return self._snapshot(m, TENTATIVE, "start", nis)
+        self.tentative = False
         reason = self._pending_reset
         self._pending_reset = None
         status = INITIALISED if reason is None else RESET
