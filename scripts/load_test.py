@@ -119,7 +119,7 @@ class Watch:
 
 
 def process_run(
-    flight: Path, rate: float, ref: dict[str, float], logdir: Path
+    flight: Path, rate: float, ref: dict[str, float], logdir: Path, eval_period: float
 ) -> dict[str, object]:
     ctx = Context()
     rclpy.init(context=ctx)
@@ -136,8 +136,8 @@ def process_run(
     fd = f"flight_dir:={flight}"
     try:
         start("fusion_node", "use_sim_time:=true", "diagnostics_period_s:=0.5")
-        start("evaluator_node", "use_sim_time:=true", "log_period_s:=0.5", "figures:=false",
-              "write_on_shutdown:=false")
+        start("evaluator_node", "use_sim_time:=true", f"log_period_s:={eval_period:.3f}",
+              "figures:=false", "write_on_shutdown:=false")
         start("radar_replay", fd, "use_sim_time:=true")
         start("rf_replay", fd, "use_sim_time:=true")
         end = time.monotonic() + 60.0
@@ -149,6 +149,9 @@ def process_run(
         ):
             w.spin(0.1)
         w.spin(1.0)
+        dead = [p.args[0] for p in procs if p.poll() is not None]
+        if dead or time.monotonic() >= end:
+            raise SystemExit(f"the graph did not come up at rate {rate:g} ({dead}): see {logdir}")
         t0 = time.monotonic()
         start("truth_replay", fd, f"rate:={rate:.3f}", "exit_when_done:=true",
               "wait_for_clock_subscribers:=4")
@@ -161,7 +164,7 @@ def process_run(
         # wait until the counts stop moving
         last: dict[str, int] = {}
         stable_since = time.monotonic()
-        while time.monotonic() - stable_since < 3.0:
+        while time.monotonic() - stable_since < 2.0 * max(eval_period, 1.0) + 1.0:
             w.spin(0.5)
             c = w.counts()
             if c != last:
@@ -189,6 +192,8 @@ def main() -> int:
     ap.add_argument("--flight", type=Path, default=None, help="flight folder (default: bundled)")
     ap.add_argument("--rates", type=float, nargs="+", default=[25.0, 50.0, 100.0, 200.0, 400.0])
     ap.add_argument("--stop-after-loss", action="store_true", help="stop at the first loss")
+    ap.add_argument("--eval-log-period", type=float, default=5.0,
+                    help="evaluator_node log_period_s (its periodic full scoring; default 5)")
     opts = ap.parse_args()
     flight = opts.flight or data_path(DEFAULT_FLIGHT)
     tmp = Path(tempfile.mkdtemp(prefix="uav_fusion_load_"))
@@ -202,7 +207,7 @@ def main() -> int:
     print(f"{'rate':>6} {'wall s':>7} {'msg/s':>7}  lost (stream: count)  reported by fusion_node")
     first_loss = None
     for rate in opts.rates:
-        r = process_run(flight, rate, ref, tmp)
+        r = process_run(flight, rate, ref, tmp, opts.eval_log_period)
         lost = r["lost"]
         assert isinstance(lost, dict)
         wall = float(r["wall_s"])  # type: ignore[arg-type]
