@@ -27,8 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--uav-prob",
         type=float,
-        default=0.5,
-        help="a radar track is the UAV's when its mean catProb[0] is at least this (0.5)",
+        default=None,
+        help="a radar track is the UAV's when its mean catProb[0] is at least this "
+        "(default: the paper profile's evaluation.raw_radar_min_mean_uav_prob, 0.5)",
     )
     parser.add_argument("--strict", action="store_true", help="stop at the first bad row")
 
@@ -52,6 +53,11 @@ def radar_position(
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.uav_prob is None:
+        from uav_fusion.core.estimator import load_profile
+
+        thr = load_profile("paper").raw_radar_min_mean_uav_prob
+        args.uav_prob = 0.5 if thr is None else thr
     if not 0.0 <= args.uav_prob <= 1.0:
         raise ConfigError(f"--uav-prob must lie in [0, 1], got {args.uav_prob}")
     folder = Path(args.folder) if args.folder else data_path(DEFAULT_FLIGHT)

@@ -6,6 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
+from uav_fusion.core import radar_class
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.evaluation import Evaluation, Evaluator, feed_flight, feed_steps, format_table
 from uav_fusion.core.records import Flight, Measurement, RadarTrack
@@ -33,24 +34,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-truth-gap", type=float, default=2.0, metavar="S",
                         help="longest truth gap interpolated across (default: 2 s)")
     parser.add_argument("--raw-min-uav-prob", type=float, default=None, metavar="P",
-                        help="UAV class threshold (catProb[0]) for the raw radar row "
-                        "(default: the profile's min_uav_prob, as radar_replay uses)")
+                        help="a radar track counts in the raw radar row when its mean "
+                        "catProb[0] is at least P (default: the profile's "
+                        "evaluation.raw_radar_min_mean_uav_prob, as radar_replay uses)")
     parser.add_argument("--strict", action="store_true",
                         help="stop at the first bad input row instead of skipping it")
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
 
 
-def uav_class_tracks(flight: Flight, min_uav_prob: float | None) -> list[RadarTrack]:
-    """The raw radar row: every report the radar classed as a UAV (before selection/gating),
-    i.e. ``catProb[0] >= min_uav_prob`` (the profile's threshold), every report when None.
-    This is the rule radar_replay applies to its ``radar/raw`` topic."""
-    out: list[RadarTrack] = []
-    for frame in flight.radar:
-        for trk in frame.tracks:
-            if min_uav_prob is not None and (trk.uav_prob is None or trk.uav_prob < min_uav_prob):
-                continue
-            out.append(trk)
-    return out
+def uav_class_tracks(flight: Flight, min_mean_uav_prob: float | None) -> list[RadarTrack]:
+    """The raw radar row: every report of the tracks the radar classed as the UAV's (mean
+    ``catProb[0]`` over the track at least ``min_mean_uav_prob``; every report when None),
+    before selection and gating: :func:`uav_fusion.core.radar_class.uav_class_tracks`, the
+    rule radar_replay applies to its ``radar/raw`` topic."""
+    return radar_class.uav_class_tracks(flight.radar, min_mean_uav_prob)
 
 
 def evaluate_flight(
@@ -63,8 +60,9 @@ def evaluate_flight(
 ) -> tuple[Evaluation, dict[str, str]]:
     """Run the estimator on ``flight`` and score every stage; returns (evaluation, run info).
 
-    The raw radar row takes the reports with ``catProb[0] >= raw_min_uav_prob``, or the
-    profile's ``min_uav_prob`` when that is None (every report when both are None).
+    The raw radar row takes the reports of the tracks whose mean ``catProb[0]`` reaches
+    ``raw_min_uav_prob``, or the profile's ``evaluation.raw_radar_min_mean_uav_prob`` when
+    that is None (every report when both are None).
     """
     from uav_fusion.core import estimator as est
 
@@ -84,7 +82,11 @@ def evaluate_flight(
             measurements.extend(item)
         else:
             measurements.append(item)
-    raw_thr = profile.min_uav_prob if raw_min_uav_prob is None else raw_min_uav_prob
+    if raw_min_uav_prob is not None and not 0.0 <= raw_min_uav_prob <= 1.0:
+        raise ConfigError(f"--raw-min-uav-prob must lie in [0, 1], got {raw_min_uav_prob}")
+    raw_thr = (
+        profile.raw_radar_min_mean_uav_prob if raw_min_uav_prob is None else raw_min_uav_prob
+    )
     feed_flight(ev, flight, uav_class_tracks(flight, raw_thr))
     feed_steps(ev, result.steps, measurements)
     info = {
@@ -95,7 +97,7 @@ def evaluate_flight(
         "filter run": f"{len(result.steps)} steps in {elapsed:.2f} s",
         "raw radar row": "every radar report"
         if raw_thr is None
-        else f"radar reports with UAV class probability >= {raw_thr:g}",
+        else f"reports of radar tracks with mean UAV class probability >= {raw_thr:g}",
     }
     for name, rep in sorted(flight.reports.items()):
         info[f"input {name}"] = rep.summary()

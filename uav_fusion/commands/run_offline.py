@@ -80,12 +80,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"  rf: {info.rf_fixes} fixes of {info.rf_attempts} attempts")
     pc = result.paper_counts()
     print(
-        f"  steps: {pc['all_steps']} = {pc['updated_estimates']} updated "
+        f"  filter steps: {pc['all_steps']} = {pc['updated_estimates']} updated "
         f"+ {pc['coasted_estimates']} coasted; {pc['discarded']} discarded"
     )
     print(
         f"  passed the NIS gate: radar {pc['radar_accepted']}, rf {pc['rf_accepted']}; "
-        f"track starts {pc['track_starts']}"
+        f"confirmed track starts {pc['track_starts']}"
+    )
+    c0 = result.counters
+    print(
+        f"  tentative (unconfirmed RF-started tracks, not estimates): {pc['tentative']} steps, "
+        f"{c0.get('tentative_started', 0)} tracks started, {c0.get('confirmed', 0)} confirmed, "
+        f"{c0.get('tentative_dropped', 0)} dropped, {c0.get('reinit_superseded', 0)} "
+        "superseded by radar"
     )
     c = result.counters
     rejected = {k[len("rejected_") :]: v for k, v in c.items() if k.startswith("rejected_")}
@@ -94,8 +101,8 @@ def run(args: argparse.Namespace) -> int:
     reinit = {k[len("reinit_") :]: v for k, v in c.items() if k.startswith("reinit_")}
     detail = ", ".join(f"{k}={v}" for k, v in sorted(reinit.items()))
     print(
-        f"  track starts: {c.get('initialised', 0)} initial, "
-        f"{c.get('reinitialisations', 0)} re-initialisations" + (f" ({detail})" if detail else "")
+        f"  confirmed tracks started at once: {c.get('initialised', 0)} initial; track "
+        f"restarts: {c.get('reinitialisations', 0)}" + (f" ({detail})" if detail else "")
     )
     rate = n / elapsed if elapsed > 0 else float("inf")
     print(f"  {n} measurements in {elapsed:.3f} s ({rate:.0f}/s)")

@@ -526,7 +526,9 @@ def feed_flight(
 def step_class(step: Any) -> str:
     """Table II class of an estimator step: "updated" or "coasted" when the step says so
     through its ``updated`` / ``coasted`` properties (an initialisation from an accepted
-    measurement is an update there), otherwise its ``status`` string."""
+    measurement is an update there), otherwise its ``status`` string ("discarded", or
+    "tentative" for a step of a track not yet confirmed: counted in ``step_status``, never
+    scored, like the fusion node that does not publish them)."""
     if getattr(step, "updated", False) is True:
         return UPDATED
     if getattr(step, "coasted", False) is True:

@@ -40,10 +40,13 @@ class RunResult:
         """The counts behind the paper's Table II rows.
 
         ``all_steps = updated_estimates + coasted_estimates`` (the paper: 2528 + 127 = 2655);
-        discarded reports (range gate, class probability, not selected, ...) are not steps.
+        discarded reports (range gate, class probability, not selected, ...) are not steps,
+        and neither are ``tentative`` ones (measurements that started or were tested against
+        a track not yet confirmed; their estimates are not published).
         ``radar_accepted`` / ``rf_accepted`` are the "after validation" rows' counts
-        (measurements that passed the NIS gate); ``track_starts`` are the updated estimates
-        that started a track from a measurement without a gate test.
+        (measurements that passed the NIS gate of a confirmed track, the confirming one
+        included); ``track_starts`` are the updated estimates that started a confirmed track
+        from a measurement without a gate test.
         """
         upd = sum(1 for s in self.steps if s.updated)
         coast = sum(1 for s in self.steps if s.coasted)
@@ -56,6 +59,7 @@ class RunResult:
             "track_starts": upd - radar_acc - rf_acc,
             "radar_accepted": radar_acc,
             "rf_accepted": rf_acc,
+            "tentative": sum(1 for s in self.steps if s.status == "tentative"),
             "discarded": sum(1 for s in self.steps if s.status == "discarded"),
         }
         if self.info is not None:
