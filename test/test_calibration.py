@@ -124,3 +124,34 @@ def test_calibrate_command_prints_the_tables(capsys: pytest.CaptureFixture[str])
 def test_calibrate_command_rejects_a_missing_folder(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
     assert cli_main(["calibrate", str(tmp_path / "nowhere")]) == 2
     assert "nowhere" in capsys.readouterr().err
+
+
+def test_one_uav_report_rule_for_calibration_evaluation_and_replay() -> None:
+    """Calibration, the evaluate command's raw row and radar_replay's raw topic take the same
+    reports: every report of the tracks whose mean catProb[0] reaches the threshold (a track
+    with one UAV-looking report among bird ones stays out; one without probabilities is in)."""
+    from uav_fusion.commands.evaluate import uav_class_tracks as eval_rule
+    from uav_fusion.core.estimator import load_profile
+    from uav_fusion.core.radar_class import track_mean_uav_prob, uav_class_tracks
+    from uav_fusion.core.records import Flight, RadarFrame, RadarTrack
+    from uav_fusion.nodes.radar_replay import uav_class_reports
+
+    def trk(t: float, tid: int, p: float | None) -> RadarTrack:
+        return RadarTrack(t, tid, 0.0, 0.0, 0.0, 100.0, 200.0, 30.0, None, p, None, None)
+
+    frames = [
+        RadarFrame(1.0, (trk(1.0, 1, 0.2), trk(1.0, 2, 0.9), trk(1.0, 3, None))),
+        RadarFrame(2.0, (trk(2.0, 1, 0.9), trk(2.0, 2, 0.3), trk(2.0, 3, None))),
+        RadarFrame(3.0, (trk(3.0, 1, 0.1), trk(3.0, 2, 0.6))),
+    ]
+    means = track_mean_uav_prob(frames)
+    assert means[1] == pytest.approx(0.4) and means[2] == pytest.approx(0.6) and means[3] is None
+    uav = uav_class_tracks(frames, 0.5)
+    assert [(r.t, r.track_id) for r in uav] == [(1.0, 2), (1.0, 3), (2.0, 2), (2.0, 3), (3.0, 2)]
+    assert len(uav_class_tracks(frames, None)) == 8
+    flight = Flight(name="x", truth=[], radar=frames, rf=[])
+    ids, other = uav_track_ids(flight, 0.5)
+    assert ids == {2, 3} and other == {1}
+    prof = load_profile("paper")
+    assert prof.raw_radar_min_mean_uav_prob == 0.5 and prof.min_uav_prob is None
+    assert eval_rule(flight, 0.5) == uav == uav_class_reports(flight, prof)

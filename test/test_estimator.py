@@ -15,6 +15,7 @@ from uav_fusion.core.estimator import (
     CvKalman,
     FusionEstimator,
     Profile,
+    RunResult,
     Step,
     build_stream,
     cv_process_noise,
@@ -132,7 +133,7 @@ def test_first_radar_initialises_then_updates(site: Site) -> None:
 
 
 def test_rf_initialisation_uses_altitude_prior(site: Site) -> None:
-    p = _profile(rf_init_altitude_m=55.0, rf_init_altitude_std_m=25.0)
+    p = _profile(rf_init_altitude_m=55.0, rf_init_altitude_std_m=25.0, tentative_sources=())
     s = FusionEstimator(p, site).process(rf(5.0, (10.0, 700.0), 0))[0]
     assert s.status == "initialised" and s.dim == 2
     np.testing.assert_array_equal(s.x[:3], [10.0, 700.0, 55.0])
@@ -278,22 +279,107 @@ def test_divergence_recovers_within_the_rejection_limit(site: Site) -> None:
     assert sum(st.updated for st in stuck) < 10
 
 
-def test_tentative_rf_track_restarts_on_first_rejection(site: Site) -> None:
-    prof = _profile(tentative_sources=(RF,), max_consecutive_rejections=None, max_coast_s=None)
-    est = FusionEstimator(prof, site)
-    assert est.process(rf(0.0, (3000.0, 2500.0), 0))[0].status == "initialised"
-    assert est.tentative
+def _mofn(**kw: object) -> Profile:
+    base: dict[str, object] = {
+        "tentative_sources": (RF,),
+        "confirm_m": 3,
+        "confirm_n": 5,
+        "max_speed_mps": 30.0,
+        "max_consecutive_rejections": None,
+        "max_coast_s": None,
+    }
+    base.update(kw)
+    return _profile(**base)
+
+
+def test_rf_track_is_tentative_until_m_of_n_hits(site: Site) -> None:
+    est = FusionEstimator(_mofn(), site)
+    s0 = est.process(rf(0.0, (100.0, 100.0), 0))[0]
+    assert (s0.status, s0.reason) == ("tentative", "start") and est.tentative
+    assert not (s0.counted or s0.updated or s0.coasted or s0.validated)
+    s1 = est.process(rf(4.0, (130.0, 100.0), 1))[0]
+    assert (s1.status, s1.reason) == ("tentative", "hit") and est.tentative
+    s2 = est.process(rf(8.0, (3000.0, 100.0), 2))[0]  # 717 m/s from the last hit
+    assert (s2.status, s2.reason) == ("tentative", "speed")
+    s3 = est.process(rf(12.0, (190.0, 100.0), 3))[0]  # third hit of four: confirmed
+    assert s3.status == "updated" and s3.validated and s3.counted and not est.tentative
+    assert est.counters["confirmed"] == 1 and est.counters["tentative_hits"] == 1
+    # a confirmed track coasts through an outlier instead of restarting
+    assert est.process(rf(16.0, (2000.0, 95.0), 4))[0].status == "coasted"
+    res = RunResult(steps=[s0, s1, s2, s3], counters={})
+    pc = res.paper_counts()
+    assert (pc["all_steps"], pc["tentative"], pc["rf_accepted"], pc["track_starts"]) == (1, 3, 1, 0)
+
+
+def test_speed_bound_rejects_agreeing_fixes_too_far_apart(site: Site) -> None:
+    """Inside a wide NIS gate (large initial velocity uncertainty) but faster than the bound:
+    a miss; without the bound the same fix is a hit."""
+    fixes = [rf(0.0, (0.0, 0.0), 0), rf(4.0, (200.0, 0.0), 1)]  # 50 m/s
+    prof = _mofn(init_velocity_std_mps=60.0)
+    steps = run_stream(FusionEstimator(prof, site), fixes)
+    assert steps[1].reason == "speed" and steps[1].nis is not None
+    assert steps[1].nis <= 5.991
+    free = run_stream(FusionEstimator(prof.with_changes(max_speed_mps=None), site), fixes)
+    assert free[1].reason == "hit"
+
+
+def test_tentative_track_dropped_when_m_is_out_of_reach(site: Site) -> None:
+    est = FusionEstimator(_mofn(), site)
+    est.process(rf(0.0, (100.0, 100.0), 0))
+    est.process(rf(4.0, (-2000.0, 100.0), 1))  # miss 1: 2 hits of the remaining 3 possible
+    est.process(rf(8.0, (2500.0, -900.0), 2))  # miss 2: 2 of the remaining 2 still possible
+    assert est.tentative and est.state() is not None and "tentative_dropped" not in est.counters
+    s3 = est.process(rf(12.0, (-2200.0, 3000.0), 3))[0]  # miss 3: out of reach
+    assert (s3.status, s3.reason) == ("tentative", "start")  # it starts the next track
+    np.testing.assert_array_equal(s3.x[:2], [-2200.0, 3000.0])
+    s4 = est.process(rf(16.0, (100.0, 100.0), 4))[0]
+    assert (s4.status, s4.reason) == ("tentative", "speed")
+    assert est.counters["tentative_dropped"] == 1 and est.counters["tentative_started"] == 2
+
+
+def test_radar_confirms_or_supersedes_a_tentative_track(site: Site) -> None:
+    est = FusionEstimator(_mofn(), site)
+    est.process(rf(0.0, (3000.0, 2500.0), 0))
     s = est.process(radar(1.0, (300.0, -200.0, 50.0), 1))[0]
-    assert (s.status, s.reason) == ("reset", "tentative")
+    assert (s.status, s.reason) == ("reset", "superseded") and s.counted
     np.testing.assert_array_equal(s.x[:3], [300.0, -200.0, 50.0])
     assert not est.tentative  # started from radar: confirmed at once
-    # an RF-started track confirmed by an accepted fix no longer restarts on one rejection
-    est2 = FusionEstimator(prof, site)
-    est2.process(rf(0.0, (100.0, 100.0), 0))
-    assert est2.process(rf(3.9, (110.0, 95.0), 1))[0].status == "updated"
-    assert not est2.tentative
-    assert est2.process(rf(7.8, (2000.0, 95.0), 2))[0].status == "coasted"
-    assert "reinit_tentative" not in est2.counters
+    assert est.counters["reinit_superseded"] == 1
+    est2 = FusionEstimator(_mofn(), site)
+    est2.process(rf(0.0, (300.0, -190.0), 0))
+    s2 = est2.process(radar(1.0, (302.0, -200.0, 50.0), 1))[0]
+    assert s2.status == "updated" and s2.validated and not est2.tentative
+
+
+def test_profile_without_tentative_sources_confirms_rf_at_once(site: Site) -> None:
+    est = FusionEstimator(_mofn(tentative_sources=()), site)
+    assert est.process(rf(0.0, (3000.0, 2500.0), 0))[0].status == "initialised"
+    assert not est.tentative
+
+
+def test_m_of_n_start_keeps_outlier_starts_out_of_the_estimates(site: Site) -> None:
+    """A flight whose first RF fixes are kilometre outliers: with M-of-N confirmation no
+    published estimate is more than 300 m off; starting on any single fix gives km errors."""
+    s = simulate_stream(5, 120.0, (2.0, 2.0, 2.0), R3, R2, velocity_std=5.0)
+    rng = np.random.default_rng(3)
+    ms: list[Measurement] = []
+    t0 = s.measurements[0].t
+    for m in s.measurements:
+        if m.source == RADAR and m.t - t0 < 60.0:
+            continue  # radar only from 60 s
+        if m.source == RF and m.t - t0 < 40.0 and (len(ms) < 2 or rng.random() < 0.6):
+            m = rf(m.t, tuple(m.z + rng.uniform(-3000, 3000, 2)), m.seq)  # type: ignore[arg-type]
+        ms.append(m)
+    t_truth = {m.seq: i for i, m in enumerate(s.measurements)}
+    truth = {m.seq: s.truth[t_truth[m.seq]] for m in ms}
+
+    def worst(prof: Profile) -> float:
+        steps = run_stream(FusionEstimator(prof, site), ms)
+        errs = [np.linalg.norm(st.x[:2] - truth[st.seq][:2]) for st in steps if st.counted]
+        return float(max(errs))
+
+    assert worst(_mofn()) < 300.0
+    assert worst(_mofn(tentative_sources=())) > 1000.0
 
 
 def test_max_coast_restarts_the_track(site: Site) -> None:
@@ -389,7 +475,8 @@ def test_single_source_runs(site: Site) -> None:
     assert {s.source for s in r_only.steps} == {RADAR}
     f_only = run_flight(fl, prof.with_changes(use_radar=False), site)
     assert {s.source for s in f_only.steps} == {RF}
-    assert f_only.steps[0].status == "initialised"
+    assert f_only.steps[0].status == "tentative"  # the paper profile's RF starts
+    assert any(s.counted for s in f_only.steps)
 
 
 # --- profiles --------------------------------------------------------------------------------
@@ -411,6 +498,9 @@ def test_paper_profile() -> None:
         (lambda d: d.update(radar_selection="best"), "radar_selection"),
         (lambda d: d["track"].update(init_sources=["sonar"]), "sonar"),
         (lambda d: d["track"].update(max_consecutive_rejections=0), "max_consecutive"),
+        (lambda d: d["track"].update(confirm_m=4, confirm_n=3), "confirm_m"),
+        (lambda d: d["track"].update(max_speed_mps=0), "max_speed_mps"),
+        (lambda d: d["evaluation"].update(raw_radar_min_mean_uav_prob=2), "raw_radar_min"),
         (lambda d: d["motion"].update(model="ca"), "not supported"),
         (lambda d: d["track"].update(max_coast=30), "unknown key 'track.max_coast'"),
         (lambda d: d.update(gate=0.9), "unknown key 'gate'"),
@@ -504,11 +594,13 @@ def test_run_command_on_the_default_flight(
     out = tmp_path / "steps.csv"
     assert main(["run", "--profile", "paper", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    m = re.search(r"^  steps: (\d+) = (\d+) updated \+ (\d+) coasted", text, re.MULTILINE)
+    m = re.search(
+        r"^  filter steps: (\d+) = (\d+) updated \+ (\d+) coasted", text, re.MULTILINE
+    )
     assert m is not None, text
     steps, upd, coast = (int(g) for g in m.groups())
     assert steps == upd + coast > 0
-    assert "largest_track" in text and "re-initialisations" in text
+    assert "largest_track" in text and "track restarts" in text and "tentative" in text
     rows = out.read_text().splitlines()
     n_meas = int(text.split(" measurements in ")[0].rsplit(maxsplit=1)[-1])
     assert len(rows) == n_meas + 1

@@ -394,6 +394,7 @@ def _synthetic_flight() -> tuple[object, object]:
 
 def test_offline_evaluation_counts_agree_with_the_estimator() -> None:
     from uav_fusion.commands.evaluate import evaluate_flight
+    from uav_fusion.core.errors import ConfigError
     from uav_fusion.core.estimator import load_profile, run_flight
     from uav_fusion.core.records import Flight
     from uav_fusion.core.site import Site
@@ -410,14 +411,18 @@ def test_offline_evaluation_counts_agree_with_the_estimator() -> None:
     assert ev.rf_attempts == counts["rf_attempts"]
     assert ev.row("rf_raw").stats.count == counts["rf_fixes"]
     all_reports = sum(len(f.tracks) for f in flight.radar)
-    assert ev.radar_reports == all_reports  # the paper profile has no class threshold
+    # the paper profile's raw row counts UAV tracks (mean catProb[0] >= 0.5): the bird track
+    # (catProb 0.1, 5 reports) is left out
+    assert ev.radar_reports == all_reports - 5
+    assert "0.5" in info["raw radar row"]
     assert ev.dropped == {}
     assert "steps in" in info["filter run"]
-    # the class threshold of the raw row leaves the bird track (catProb 0.1) out
-    ev_uav, info_uav = evaluate_flight(flight, "paper", site, raw_min_uav_prob=0.5)
-    assert ev_uav.radar_reports == all_reports - 5
-    assert "0.5" in info_uav["raw radar row"]
-    assert ev_uav.row("kf_all").stats.count == counts["all_steps"]
+    # a threshold of 0 takes every report; the filter's rows do not change
+    ev_all, _ = evaluate_flight(flight, "paper", site, raw_min_uav_prob=0.0)
+    assert ev_all.radar_reports == all_reports
+    assert ev_all.row("kf_all").stats.count == counts["all_steps"]
+    with pytest.raises(ConfigError, match="raw-min-uav-prob"):
+        evaluate_flight(flight, "paper", site, raw_min_uav_prob=1.5)
 
 
 def test_evaluate_command_prints_the_table_and_writes_the_report(

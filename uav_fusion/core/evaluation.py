@@ -320,9 +320,12 @@ class Evaluator:
     def add_step(self, t: float, status: str, x: Values) -> bool:
         """One filter output step: ``status`` "updated" or "coasted", ``x`` the state (≥3).
 
-        Other statuses are counted in :attr:`step_status` but are not filter estimates
-        scored in Table II.
+        Other statuses (``discarded``, ``tentative``) are counted in :attr:`step_status` but
+        are not filter estimates scored in Table II; their state may be NaN (no track).
         """
+        if status not in self._steps:
+            self.step_status[status] += 1
+            return True
         t = float(t)
         xs = [float(v) for v in x]
         if len(xs) < 3:
