@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.metrics import ErrorStats, error_stats, interpolate_truth, position_errors
+from uav_fusion.core.radar_class import DEFAULT_MIN_MEAN_UAV_PROB, uav_class_tracks
 from uav_fusion.core.records import Flight, Measurement, RadarTrack
 
 FloatArray = npt.NDArray[np.float64]
@@ -507,18 +508,21 @@ def feed_flight(
     ev: Evaluator,
     flight: Flight,
     radar_tracks: Iterable[RadarTrack] | None = None,
+    min_mean_uav_prob: float | None = DEFAULT_MIN_MEAN_UAV_PROB,
 ) -> None:
     """Feed a flight's truth, raw radar reports and RF attempts.
 
-    ``radar_tracks`` selects which radar track reports count as the raw radar row; the default
-    is every track of every frame.
+    ``radar_tracks`` are the reports of the raw radar row; by default the radar's UAV reports
+    (:func:`uav_fusion.core.radar_class.uav_class_tracks` with ``min_mean_uav_prob``, the
+    paper profile's ``evaluation.raw_radar_min_mean_uav_prob`` unless given; None: every
+    report).
     """
     for f in flight.truth:
         ev.add_truth(f.t, f.e, f.n, f.u)
     tracks = (
         radar_tracks
         if radar_tracks is not None
-        else (trk for frame in flight.radar for trk in frame.tracks)
+        else uav_class_tracks(flight.radar, min_mean_uav_prob)
     )
     for trk in tracks:
         ev.add_radar_report(trk.t, trk.e, trk.n, trk.u, trk.rcs_dbsm)

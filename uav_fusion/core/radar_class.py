@@ -22,6 +22,8 @@ from collections.abc import Iterable
 
 from uav_fusion.core.records import RadarFrame, RadarTrack
 
+DEFAULT_MIN_MEAN_UAV_PROB = 0.5  # the paper profile's evaluation.raw_radar_min_mean_uav_prob
+
 
 def track_mean_uav_prob(frames: Iterable[RadarFrame]) -> dict[int, float | None]:
     """Mean UAV class probability of every radar track id (None: no finite probability)."""

@@ -16,6 +16,7 @@ import numpy.typing as npt
 import yaml
 
 from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.radar_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.resources import config_path
 
@@ -49,7 +50,8 @@ class Profile:
     confirm_m: int = 1  # a tentative track is confirmed by confirm_m hits ...
     confirm_n: int = 1  # ... among its first confirm_n measurements (the start included)
     max_speed_mps: float | None = None  # speed plausibility bound while tentative
-    raw_radar_min_mean_uav_prob: float | None = 0.5  # the raw radar row's UAV-track rule
+    # the raw radar row's UAV-track rule (core/radar_class.py)
+    raw_radar_min_mean_uav_prob: float | None = DEFAULT_MIN_MEAN_UAV_PROB
     description: str = ""
     r_note: str = ""
     source: Path | None = field(default=None, compare=False)
@@ -293,7 +295,10 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         confirm_n=confirm["confirm_n"],
         max_speed_mps=_opt_float(track, "max_speed_mps", f"{where}: track", None),
         raw_radar_min_mean_uav_prob=_opt_float(
-            evaluation, "raw_radar_min_mean_uav_prob", f"{where}: evaluation", 0.5
+            evaluation,
+            "raw_radar_min_mean_uav_prob",
+            f"{where}: evaluation",
+            DEFAULT_MIN_MEAN_UAV_PROB,
         ),
         description=str(doc.get("description", "") or ""),
         r_note=str(meas.get("note", "") or ""),
