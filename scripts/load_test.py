@@ -41,7 +41,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
 
+from uav_fusion.conversions import stamp_from_time
 from uav_fusion.nodes.graph import Graph
 from uav_fusion.replay import flight_span
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
@@ -74,6 +76,7 @@ def lossless_run(flight: Path, out: Path) -> dict[str, float]:
         ev = g.evaluator
         n_msgs = g.fusion_inputs_published() + g.evaluator_expected()
         return {
+            "t_end": t_b,
             "flight_s": t_b - t_a,
             "wall_s": wall,
             "fusion_radar": g.fusion.received["radar"],
@@ -93,6 +96,13 @@ class Watch:
         self.ex.add_node(self.node)
         self.values: dict[str, dict[str, str]] = {}
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 100)
+        self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
+
+    def tick(self, t: float) -> None:
+        """Advance the simulated clock (the evaluator's periodic report runs on it)."""
+        msg = Clock()
+        msg.clock = stamp_from_time(t)
+        self.clock_pub.publish(msg)
 
     def _on(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
@@ -161,10 +171,14 @@ def process_run(
         wall = time.monotonic() - t0
         if truth.returncode != 0:
             raise SystemExit(f"truth_replay failed at rate {rate:g}: see {logdir}")
-        # wait until the counts stop moving
+        # wait until the counts stop moving; keep simulated time going after the replay's
+        # end, since evaluator_node's periodic /diagnostics run on the simulated clock
         last: dict[str, int] = {}
         stable_since = time.monotonic()
-        while time.monotonic() - stable_since < 2.0 * max(eval_period, 1.0) + 1.0:
+        t_sim = float(ref["t_end"])
+        while time.monotonic() - stable_since < 3.0:
+            t_sim += eval_period
+            w.tick(t_sim)
             w.spin(0.5)
             c = w.counts()
             if c != last:
