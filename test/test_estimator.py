@@ -351,6 +351,22 @@ def test_radar_confirms_or_supersedes_a_tentative_track(site: Site) -> None:
     assert s2.status == "updated" and s2.validated and not est2.tentative
 
 
+def test_online_frame_confirms_or_supersedes_a_tentative_track(site: Site) -> None:
+    est = FusionEstimator(_mofn(radar_selection="online"), site)
+    est.process(rf(0.0, (300.0, -190.0), 0))
+    frame = [radar(1.0, (700.0, 300.0, 50.0), 1), radar(1.0, (302.0, -200.0, 50.0), 2)]
+    steps = est.process_frame(frame)
+    assert [(s.status, s.reason) for s in steps] == [
+        ("discarded", "not_selected"), ("updated", None)
+    ]
+    assert not est.tentative
+    est2 = FusionEstimator(_mofn(radar_selection="online"), site)
+    est2.process(rf(0.0, (3000.0, 2500.0), 0))
+    steps2 = est2.process_frame(frame)  # neither inside the gate: the closer one takes over
+    assert [(s.status, s.reason) for s in steps2] == [("reset", "superseded"), ("discarded", "nis")]
+    assert not est2.tentative
+
+
 def test_profile_without_tentative_sources_confirms_rf_at_once(site: Site) -> None:
     est = FusionEstimator(_mofn(tentative_sources=()), site)
     assert est.process(rf(0.0, (3000.0, 2500.0), 0))[0].status == "initialised"

@@ -454,3 +454,33 @@ def test_evaluate_command_reports_a_missing_folder(
     rc = main(["evaluate", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
     assert rc == 2
     assert "flight folder not found" in capsys.readouterr().err
+
+
+def test_tentative_estimator_steps_are_counted_but_never_scored() -> None:
+    """Steps of an RF track that is not yet confirmed (status ``tentative``, NaN state when
+    the track was dropped) are listed by status; the fused rows, their denominator and the RF
+    after-validation row only see the confirmed track's steps."""
+    from uav_fusion.core.estimator import FusionEstimator, load_profile
+    from uav_fusion.core.site import load_site
+
+    site = load_site()
+    prof = load_profile("paper")
+    assert (prof.confirm_m, prof.confirm_n) == (3, 5)
+    est = FusionEstimator(prof, site)
+    ev = Evaluator()
+    straight_truth(ev, duration=30.0)
+    meas = []
+    for k, t in enumerate(T0 + np.arange(1.0, 25.0, 4.0)):
+        e, n, _ = truth_at(float(t))
+        off = 3000.0 if k == 1 else 0.0  # one outlier among the first fixes
+        meas.append(Measurement(float(t), "rf", np.array([e + off, n + 2.0]), seq=k))
+    steps = [s for m in meas for s in est.process(m)]
+    assert [s.status for s in steps] == [
+        "tentative", "tentative", "tentative", "updated", "updated", "updated"
+    ]
+    feed_steps(ev, steps, meas)
+    res = ev.evaluate()
+    assert res.step_status == {"tentative": 3, "updated": 3}
+    assert res.steps == 3 and res.row("kf_all").stats.count == 3
+    assert res.row("rf_validated").stats.count == 3
+    assert res.dropped == {}
