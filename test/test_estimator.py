@@ -349,6 +349,11 @@ def test_radar_confirms_or_supersedes_a_tentative_track(site: Site) -> None:
     est2.process(rf(0.0, (300.0, -190.0), 0))
     s2 = est2.process(radar(1.0, (302.0, -200.0, 50.0), 1))[0]
     assert s2.status == "updated" and s2.validated and not est2.tentative
+    # radar may not start tracks: the disagreeing report still ends the tentative track
+    est3 = FusionEstimator(_mofn(init_sources=(RF,)), site)
+    est3.process(rf(0.0, (3000.0, 2500.0), 0))
+    s3 = est3.process(radar(1.0, (300.0, -200.0, 50.0), 1))[0]
+    assert (s3.status, s3.reason) == ("discarded", "no_track") and est3.state() is None
 
 
 def test_online_frame_confirms_or_supersedes_a_tentative_track(site: Site) -> None:

@@ -448,7 +448,9 @@ class FusionEstimator:
         self._count(f"tentative_miss_{reason}")
         if confirming:  # a radar report disagrees: it supersedes the tentative track
             self.reset("superseded")
-            return self._initialise(m, nis)
+            if m.source in self._init_sources:
+                return self._initialise(m, nis)
+            return self._discard(m, "no_track", nis)
         if self._hits + (self._confirm_n - self._tested) < self._confirm_m:
             self._count("tentative_dropped")
             self.active = False
