@@ -40,7 +40,13 @@ def generate_launch_description() -> LaunchDescription:
             "flight_dir", default_value="", description="flight folder ('' = bundled flight)"
         ),
         DeclareLaunchArgument(
-            "rate", default_value="20.0", description="replay speed (0.0 = as fast as lossless)"
+            "rate",
+            default_value="20.0",
+            description=(
+                "replay speed, times real time (> 0 here: with the evaluator in its own"
+                " process, 0.0 is paced by DDS acknowledgements and runs slower than real"
+                " time; for a fast lossless run use 'ros2 run uav_fusion uav_fusion demo')"
+            ),
         ),
         DeclareLaunchArgument("profile", default_value="paper", description="estimator profile"),
         DeclareLaunchArgument(
