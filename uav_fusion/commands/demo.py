@@ -54,6 +54,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="play this rosbag2 bag (bag_player) instead of replaying a flight folder; the "
         "offline comparison then needs --flight (the folder the bag was made from)",
     )
+    parser.add_argument(
+        "--record",
+        metavar="DIR",
+        help="with --bag: also run bag_recorder and record the fusion node's outputs "
+        "(fusion/odom*, fusion/accepted/*, /diagnostics) into this rosbag2 MCAP directory",
+    )
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
     parser.add_argument("--no-check", action="store_true", help="skip the offline comparison")
     parser.add_argument(
@@ -94,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
     if not flight_dir.is_dir():
         raise ConfigError(f"{flight_dir}: flight folder not found")
     out = Path(args.out)
+    if args.record and not args.bag:
+        raise ConfigError("--record goes with --bag (record the graph fed by bag_player)")
+    if args.record and Path(args.record).exists():
+        raise ConfigError(f"{args.record}: already exists; bag_recorder writes a new directory")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
     if args.bag:
@@ -148,6 +158,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+# What ``demo --bag --record`` records: the fusion node's outputs.
+RECORDED_TOPICS = (
+    "fusion/odom",
+    "fusion/odom/updated",
+    "fusion/odom/coasted",
+    "fusion/accepted/radar",
+    "fusion/accepted/rf",
+    "/diagnostics",
+)
+
+
 def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
     """The fusion and evaluator nodes fed by bag_player (bag time drives /clock)."""
     import rclpy
@@ -160,6 +181,7 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
 
     from uav_fusion.core.evaluation import format_table
     from uav_fusion.nodes.bag_player import BagPlayer
+    from uav_fusion.nodes.bag_recorder import BagRecorder
     from uav_fusion.nodes.evaluator_node import EvaluatorNode
     from uav_fusion.nodes.fusion_node import FusionNode
 
@@ -181,6 +203,14 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
             bag=args.bag, context=ctx, parameter_overrides=[Parameter("rate", value=rate)]
         )
         nodes.append(player)
+        recorder: BagRecorder | None = None
+        if args.record:
+            recorder = BagRecorder(
+                output=args.record,
+                context=ctx,
+                parameter_overrides=[Parameter("topics", value=list(RECORDED_TOPICS))],
+            )
+            nodes.append(recorder)
         if args.quiet:
             for n in nodes:
                 set_logger_level(n.get_logger().name, LoggingSeverity.WARN)
@@ -220,6 +250,21 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
                 >= expected + fusion.steps_published + fusion.accepted_published
             )
         )
+        if recorder is not None:
+            # every step and accepted measurement the fusion node published is in the bag
+            ok = ok and spin_until(
+                lambda: (
+                    recorder.received["/fusion/odom"] >= fusion.steps_published
+                    and recorder.received["/fusion/accepted/radar"]
+                    + recorder.received["/fusion/accepted/rf"]
+                    >= fusion.accepted_published
+                )
+            )
+            written = recorder.close()
+            print(
+                f"demo: recorded {written.message_count} messages into {args.record}",
+                flush=True,
+            )
         if getattr(player, "error", None):
             print(f"demo: bag_player: {player.error}", file=sys.stderr)
             return 1
