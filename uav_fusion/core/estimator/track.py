@@ -188,6 +188,7 @@ class FusionEstimator:
         self._radar_pos = tuple(float(v) for v in site.radar.enu)
         self._gate2 = float(self.range_gate_m) ** 2
         self._init_sources = frozenset(profile.init_sources)
+        self._min_uav_prob = profile.min_uav_prob
         self._max_rej = profile.max_consecutive_rejections
         self._max_coast = profile.max_coast_s
         self._tentative_sources = frozenset(profile.tentative_sources)
@@ -351,7 +352,7 @@ class FusionEstimator:
             dz = z[2] - rz
             if not dx * dx + dy * dy + dz * dz <= self._gate2:
                 return self._discard(m, "range_gate")
-            mp = self.profile.min_uav_prob
+            mp = self._min_uav_prob
             if mp is not None and (m.uav_prob is None or m.uav_prob < mp):
                 return self._discard(m, "class_prob")
         if not self.active and src not in self._init_sources:
@@ -365,13 +366,10 @@ class FusionEstimator:
         return self._kf.update2(z[0], z[1], r, g)
 
     def _snapshot(self, m: Measurement, status: str, reason: str | None, nis: float | None) -> Step:
-        kf = self._kf
-        if self.active:
-            x: Sequence[float] = tuple(kf.x)
-            P: Sequence[float] = tuple(kf.P)
-        else:
-            x, P = _NAN6, _NAN21
-        return Step(m.t, m.source, status, reason, nis, x, P, m.dim, m.track_id, m.seq)
+        if self.active:  # the filter never changes its lists in place: no copy needed
+            kf = self._kf
+            return Step(m.t, m.source, status, reason, nis, kf.x, kf.P, len(m.z), m.track_id, m.seq)
+        return Step(m.t, m.source, status, reason, nis, _NAN6, _NAN21, len(m.z), m.track_id, m.seq)
 
     def _discard(self, m: Measurement, reason: str, nis: float | None = None) -> Step:
         self._count(DISCARDED)
@@ -386,19 +384,8 @@ class FusionEstimator:
         self.consecutive_rejections = 0
         self.last_used_t = m.t
         self.tentative = False
-        kf = self._kf
-        return Step(
-            m.t,
-            m.source,
-            UPDATED,
-            None,
-            nis,
-            tuple(kf.x),
-            tuple(kf.P),
-            m.dim,
-            m.track_id,
-            m.seq,
-        )
+        kf = self._kf  # the filter never changes its lists in place: no copy needed
+        return Step(m.t, m.source, UPDATED, None, nis, kf.x, kf.P, len(m.z), m.track_id, m.seq)
 
     def _rejected(self, m: Measurement, nis: float) -> Step:
         self._count(COASTED)
