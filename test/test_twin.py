@@ -60,7 +60,23 @@ def test_same_seed_gives_identical_files(site, tmp_path: Path) -> None:  # type:
 def test_bundled_default_flight_is_what_the_code_generates(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     out = tmp_path / "regen"
     assert cli_main(["generate", "--out", str(out)]) == 0
-    assert _files(out) == _files(data_path(DEFAULT_FLIGHT))
+    shipped = data_path(DEFAULT_FLIGHT)
+    if _files(out) == _files(shipped):
+        return  # byte for byte, with the pinned numpy/scipy/pymap3d
+    # Other library versions may round the last printed digit differently: then the flights
+    # must still agree record by record to well below a millimetre.
+    a, b = load_flight(out, site, strict=True), load_flight(shipped, site, strict=True)
+    at, aenu = a.truth_arrays()
+    bt, benu = b.truth_arrays()
+    assert at.shape == bt.shape and np.max(np.abs(at - bt)) < 1e-6
+    assert np.max(np.abs(aenu - benu)) < 1e-4
+    ra = np.array([(t.t, t.track_id, t.e, t.n, t.u) for f in a.radar for t in f.tracks])
+    rb = np.array([(t.t, t.track_id, t.e, t.n, t.u) for f in b.radar for t in f.tracks])
+    assert ra.shape == rb.shape and np.max(np.abs(ra - rb)) < 1e-4
+    fa = np.array([(x.t, x.ok, x.e, x.n) for x in a.rf], dtype=float)
+    fb = np.array([(x.t, x.ok, x.e, x.n) for x in b.rf], dtype=float)
+    assert fa.shape == fb.shape
+    np.testing.assert_allclose(fa, fb, rtol=0, atol=1e-4, equal_nan=True)
 
 
 def test_round_trip_through_files_reproduces_the_twin(short_twin, site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

@@ -160,6 +160,7 @@ class EvaluatorNode(Node):
         self.create_subscription(Odometry, self.coasted_topic, self._on_coasted, qos)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/write_report", self._on_write_report)
+        self._logged_at = -1
         if self.log_period_s > 0 and math.isfinite(self.log_period_s):
             self.create_timer(self.log_period_s, self._on_timer)
         self.create_timer(0.2, self._check_clock, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -288,7 +289,10 @@ class EvaluatorNode(Node):
 
     def _on_timer(self) -> None:
         ev = self.evaluate()
-        self.get_logger().info(rows_summary(ev))
+        seen = sum(self.received.values())
+        if seen != self._logged_at:  # log only when something new arrived; diagnostics always
+            self._logged_at = seen
+            self.get_logger().info(rows_summary(ev))
         self.diag_pub.publish(self.diagnostics(ev))
 
     def diagnostics(self, ev: Evaluation) -> DiagnosticArray:
