@@ -37,7 +37,11 @@ def generate_launch_description() -> LaunchDescription:
             description="YAML parameter file (sections = node names)",
         ),
         DeclareLaunchArgument(
-            "flight_dir", default_value="", description="flight folder ('' = bundled flight)"
+            "flight_dir",
+            default_value=PathJoinSubstitution(
+                [FindPackageShare(PACKAGE), "data", "default_flight"]
+            ),
+            description="flight folder in the Dataset-28 layout (default: the bundled flight)",
         ),
         DeclareLaunchArgument(
             "rate",
@@ -86,7 +90,11 @@ def generate_launch_description() -> LaunchDescription:
             executable="evaluator_node",
             name="evaluator_node",
             output="screen",
-            parameters=[params_file, {"use_sim_time": True, "output_dir": output_dir}],
+            parameters=[
+                params_file,
+                # the flight's radar file supplies RCS for the report's histogram
+                {"use_sim_time": True, "output_dir": output_dir, "rcs_flight_dir": flight_dir},
+            ],
             condition=IfCondition(evaluator),
         ),
         replay(

@@ -290,3 +290,36 @@ def test_output_dir_can_change_at_run_time(ros: None, tmp_path: Path) -> None:
     files = node.write_report()
     assert files.folder == tmp_path / "b" and files.json.is_file()
     node.destroy_node()
+
+
+def test_rcs_comes_from_the_flight_folder_when_given(ros: None, tmp_path: Path) -> None:
+    """Pose messages carry no RCS; with ``rcs_flight_dir`` each raw report gets its own."""
+    from test_graph_flight import write_flight
+
+    from uav_fusion.conversions import radar_track_to_msg
+    from uav_fusion.core.dataset import load_flight
+
+    site = load_site()
+    folder = write_flight(tmp_path / "flight", seconds=10.0)
+    tracks = [trk for f in load_flight(folder, site).radar for trk in f.tracks]
+    assert {t.rcs_dbsm for t in tracks} == {-12.0, -25.0, None}  # UAV, clutter, no RCS
+    node = EvaluatorNode(parameter_overrides=[
+        Parameter("rcs_flight_dir", value=str(folder)),
+        Parameter("output_dir", value=str(tmp_path / "rep")),
+    ])
+    plain = EvaluatorNode(parameter_overrides=[Parameter("output_dir", value=str(tmp_path / "r2"))])
+    try:
+        for trk in tracks:
+            msg = radar_track_to_msg(trk, R3, site.frame_id)
+            node._on_radar_raw(msg)
+            plain._on_radar_raw(msg)
+        got = node.evaluate().radar_rcs_dbsm
+        want = [t.rcs_dbsm for t in tracks if t.rcs_dbsm is not None]
+        assert sorted(got[np.isfinite(got)].tolist()) == sorted(want)
+        assert int(np.isnan(got).sum()) == len(tracks) - len(want)
+        assert np.isnan(plain.evaluate().radar_rcs_dbsm).all()
+        files = node.write_report()
+        assert (files.folder / "radar_rcs_histogram.png").is_file()
+    finally:
+        node.destroy_node()
+        plain.destroy_node()

@@ -86,6 +86,7 @@ def _overrides(args: argparse.Namespace, flight_dir: Path, out: Path) -> dict[st
             "output_dir": str(out),
             "figures": not args.no_figures,
             "flight_name": flight_dir.name,
+            "rcs_flight_dir": str(flight_dir),
             "log_period_s": 0.0,
             "write_on_shutdown": False,
             "use_sim_time": True,

@@ -57,8 +57,9 @@ from uav_fusion.conversions import (
     navsatfix_to_truth,
     odometry_to_state,
     time_from_stamp,
+    time_to_ns,
 )
-from uav_fusion.core.dataset import fmt_utc
+from uav_fusion.core.dataset import fmt_utc, load_flight
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
 from uav_fusion.core.report import ReportFiles, write_report
@@ -96,10 +97,31 @@ PARAMS: tuple[Param, ...] = (
     Param("flight_name", "", "flight name written into the report", read_only=False),
     Param("step_gap_s", 10.0, "gaps between fused steps longer than this are reported (s)",
           lo=1e-3, hi=1e9),
+    Param("rcs_flight_dir", "",
+          "flight folder whose radar file supplies each raw report's RCS for the RCS "
+          "histogram (standard pose messages carry no RCS); '' = no RCS"),
     Param("clock_jump_back_s", 1.0,
           "a backwards jump of the simulated clock larger than this restarts the evaluation",
           lo=0.0, hi=1e9),
 )
+
+
+def _rcs_key(t: float, e: float, n: float) -> tuple[int, int, int]:
+    """A radar report's identity: its stamp (ns) and horizontal position (mm)."""
+    return time_to_ns(t), round(float(e) * 1000.0), round(float(n) * 1000.0)
+
+
+def _rcs_lookup(flight_dir: str, site: Site) -> dict[tuple[int, int, int], float]:
+    """RCS (dBsm) of every radar report of a flight folder, keyed by :func:`_rcs_key`."""
+    if not flight_dir:
+        return {}
+    flight = load_flight(flight_dir, site)
+    return {
+        _rcs_key(trk.t, trk.e, trk.n): trk.rcs_dbsm
+        for frame in flight.radar
+        for trk in frame.tracks
+        if trk.rcs_dbsm is not None
+    }
 
 
 class EvaluatorNode(Node):
@@ -132,6 +154,7 @@ class EvaluatorNode(Node):
         try:
             self.site: Site = load_site(site_file or None)
             self.evaluator = self._new_evaluator()
+            self._rcs = _rcs_lookup(str(v["rcs_flight_dir"]), self.site)
         except (UavFusionError, ValueError) as exc:
             raise UavFusionError(f"{NODE_NAME}: bad parameters: {exc}") from None
         self.frame_id = frame or self.site.frame_id
@@ -226,7 +249,9 @@ class EvaluatorNode(Node):
 
     def _radar_raw(self, msg: PoseWithCovarianceStamped) -> bool:
         m = msg_to_radar_measurement(msg, self.frame_id)
-        return self.evaluator.add_radar_report(m.t, *(float(v) for v in m.z))
+        rcs = self._rcs.get(_rcs_key(m.t, m.z[0], m.z[1])) if self._rcs else None
+        e, n, u = (float(v) for v in m.z)
+        return self.evaluator.add_radar_report(m.t, e, n, u, rcs_dbsm=rcs)
 
     def _rf(self, msg: PointStamped) -> bool:
         self._check_frame(msg.header.frame_id)
