@@ -16,7 +16,9 @@ most of its time in call overhead. This module exploits the structure instead:
 
 State is held in Python lists: ``x`` 6 floats, ``P`` the 21 floats of the upper triangle,
 row by row (``UPPER_INDEX[i][j]`` gives the position of element (i, j)); :func:`expand_upper`
-turns it into the full symmetric 6x6 array.
+turns it into the full symmetric 6x6 array. The kernels read both lists into local variables
+in one unpacking and install new lists rather than writing element by element (the same
+floating-point operations in the same order, so the same results, with less interpreter work).
 :mod:`uav_fusion.core.estimator.models` has the plain matrix version the tests compare with.
 """
 
@@ -40,7 +42,7 @@ _FULL = np.array(UPPER_INDEX, dtype=np.intp).reshape(36)
 _UPPER_PAIRS = tuple((i, j) for i in range(6) for j in range(i, 6))
 
 
-def expand_upper(p: Sequence[float]) -> FloatArray:
+def expand_upper(p: Sequence[float] | FloatArray) -> FloatArray:
     """Full symmetric 6x6 array from the 21-float upper triangle."""
     return np.asarray(p, dtype=float)[_FULL].reshape(6, 6)
 

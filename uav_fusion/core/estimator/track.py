@@ -44,6 +44,7 @@ The paper's "KF all steps" are the steps that are neither discarded nor tentativ
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Sequence
 
 import numpy as np
@@ -70,23 +71,26 @@ USED = frozenset((UPDATED, INITIALISED, RESET))
 _DIMS = {RADAR: 3, RF: 2}
 _MEAS_KEY = {RADAR: "radar_measurements", RF: "rf_measurements"}
 _UPD_KEY = {RADAR: "updated_radar", RF: "updated_rf"}
-_NAN6 = (math.nan,) * 6
-_NAN21 = (math.nan,) * 21
+# a step's state: x (6 values) then the upper triangle of P (21 values), as packed doubles
+_STATE = struct.Struct("27d")
+_pack_state = _STATE.pack
+_NAN_STATE = _pack_state(*(math.nan,) * 27)
 
 
 class Step:
     """What the estimator did with one measurement, and the estimate at its time.
 
     ``x`` (6,) and ``P`` (6, 6) are the state after this measurement (NaN when no track
-    exists); they are built on first access from the filter's internal copy (``P`` is kept
-    as its 21-value upper triangle).
+    exists); they are built on first access from ``state``, the 27 packed doubles of ``x``
+    and of the upper triangle of ``P`` (row by row). Packed bytes rather than Python floats
+    keep a long run's steps small: fewer objects to allocate, hold and scan for the garbage
+    collector.
     """
 
     __slots__ = (
         "_P",
-        "_Pl",
+        "_state",
         "_x",
-        "_xl",
         "dim",
         "nis",
         "reason",
@@ -104,8 +108,7 @@ class Step:
         status: str,
         reason: str | None,
         nis: float | None,
-        x: Sequence[float],
-        P: Sequence[float],
+        state: bytes,
         dim: int,
         track_id: int | None,
         seq: int,
@@ -115,8 +118,7 @@ class Step:
         self.status = status
         self.reason = reason
         self.nis = nis
-        self._xl = x
-        self._Pl = P
+        self._state = state
         self._x: FloatArray | None = None
         self._P: FloatArray | None = None
         self.dim = dim
@@ -126,13 +128,13 @@ class Step:
     @property
     def x(self) -> FloatArray:
         if self._x is None:
-            self._x = np.array(self._xl, dtype=float)
+            self._x = np.frombuffer(self._state, dtype=float, count=6).copy()
         return self._x
 
     @property
     def P(self) -> FloatArray:
         if self._P is None:
-            self._P = expand_upper(self._Pl)
+            self._P = expand_upper(np.frombuffer(self._state, dtype=float, count=21, offset=48))
         return self._P
 
     @property
@@ -366,10 +368,12 @@ class FusionEstimator:
         return self._kf.update2(z[0], z[1], r, g)
 
     def _snapshot(self, m: Measurement, status: str, reason: str | None, nis: float | None) -> Step:
-        if self.active:  # the filter never changes its lists in place: no copy needed
+        if self.active:
             kf = self._kf
-            return Step(m.t, m.source, status, reason, nis, kf.x, kf.P, len(m.z), m.track_id, m.seq)
-        return Step(m.t, m.source, status, reason, nis, _NAN6, _NAN21, len(m.z), m.track_id, m.seq)
+            state = _pack_state(*kf.x, *kf.P)
+        else:
+            state = _NAN_STATE
+        return Step(m.t, m.source, status, reason, nis, state, len(m.z), m.track_id, m.seq)
 
     def _discard(self, m: Measurement, reason: str, nis: float | None = None) -> Step:
         self._count(DISCARDED)
@@ -384,8 +388,9 @@ class FusionEstimator:
         self.consecutive_rejections = 0
         self.last_used_t = m.t
         self.tentative = False
-        kf = self._kf  # the filter never changes its lists in place: no copy needed
-        return Step(m.t, m.source, UPDATED, None, nis, kf.x, kf.P, len(m.z), m.track_id, m.seq)
+        kf = self._kf
+        state = _pack_state(*kf.x, *kf.P)
+        return Step(m.t, m.source, UPDATED, None, nis, state, len(m.z), m.track_id, m.seq)
 
     def _rejected(self, m: Measurement, nis: float) -> Step:
         self._count(COASTED)
