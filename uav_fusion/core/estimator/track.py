@@ -43,6 +43,7 @@ The paper's "KF all steps" are the steps that are neither discarded nor tentativ
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 from collections.abc import Sequence
@@ -75,6 +76,13 @@ _UPD_KEY = {RADAR: "updated_radar", RF: "updated_rf"}
 _STATE = struct.Struct("27d")
 _pack_state = _STATE.pack
 _NAN_STATE = _pack_state(*(math.nan,) * 27)
+
+
+@functools.lru_cache(maxsize=64)
+def nis_gate(probability: float, dim: int) -> float:
+    """NIS gate: the chi-square quantile at ``probability`` for ``dim`` degrees of freedom
+    (computed once per pair: estimators are built often, by nodes, tests and sweeps)."""
+    return float(chi2.ppf(probability, dim))
 
 
 class Step:
@@ -180,7 +188,7 @@ class FusionEstimator:
         self._kf = CvKalman(profile.q)
         self._r: dict[str, PackedR] = {RADAR: pack_r(profile.r_radar), RF: pack_r(profile.r_rf)}
         self.gate_threshold: dict[int, float] = {
-            d: float(chi2.ppf(profile.nis_probability, d)) for d in (2, 3)
+            d: nis_gate(profile.nis_probability, d) for d in (2, 3)
         }
         self._g2 = self.gate_threshold[2]
         self._g3 = self.gate_threshold[3]
