@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pymap3d
-import yaml
 
 from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.yamlio import read_yaml_file
 from uav_fusion.resources import DEFAULT_SITE, config_path
 
 FloatArray = npt.NDArray[np.float64]
@@ -207,10 +207,4 @@ def site_from_dict(doc: dict[str, Any], source: Path | None = None) -> Site:
 def load_site(path: str | Path | None = None) -> Site:
     """Load a site YAML file (default: the shipped Lake Wheeler description)."""
     p = Path(path) if path is not None else config_path(DEFAULT_SITE)
-    if not p.is_file():
-        raise ConfigError(f"{p}: site file not found")
-    try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
-    return site_from_dict(doc, p)
+    return site_from_dict(read_yaml_file(p, "site file"), p)

@@ -12,9 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
-
 from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.yamlio import read_yaml_file
 from uav_fusion.resources import config_path
 
 DEFAULT_TWIN_CONFIG = "twin_default.yaml"
@@ -237,10 +236,4 @@ def _validate(cfg: TwinConfig, src: str) -> None:
 def load_twin_config(path: str | Path | None = None) -> TwinConfig:
     """Load twin parameters (default: the shipped ``config/twin_default.yaml``)."""
     p = Path(path) if path is not None else config_path(DEFAULT_TWIN_CONFIG)
-    if not p.is_file():
-        raise ConfigError(f"{p}: twin configuration file not found")
-    try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
-    return twin_config_from_dict(doc, p)
+    return twin_config_from_dict(read_yaml_file(p, "twin configuration file"), p)

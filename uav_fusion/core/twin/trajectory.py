@@ -19,11 +19,11 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin.config import FlightDynamics
+from uav_fusion.core.yamlio import read_yaml_file
 
 FloatArray = npt.NDArray[np.float64]
 G = 9.80665
@@ -105,13 +105,7 @@ def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> F
 
 def load_flight_plan(path: str | Path, site: Site) -> FlightPlan:
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"{p}: waypoint file not found")
-    try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
-    return flight_plan_from_dict(doc, site, p)
+    return flight_plan_from_dict(read_yaml_file(p, "waypoint file"), site, p)
 
 
 @dataclass(frozen=True)
