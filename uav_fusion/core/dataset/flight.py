@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from uav_fusion.core.dataset import fmt_utc
+from uav_fusion.core.dataset._source import fmt_utc
 from uav_fusion.core.dataset.radar import read_radar_jsonl
 from uav_fusion.core.dataset.rf import read_rf_csv
 from uav_fusion.core.dataset.truth import read_truth

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from uav_fusion.core.dataset import T_MAX, T_MIN, Source, TimeOrder
+from uav_fusion.core.dataset._source import T_MAX, T_MIN, Source, TimeOrder
 from uav_fusion.core.records import LoadReport, RadarFrame, RadarTrack
 from uav_fusion.core.site import Site
 

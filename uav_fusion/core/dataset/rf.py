@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uav_fusion.core.dataset import Source, TimeOrder, parse_clock_time, to_float, to_int
+from uav_fusion.core.dataset._source import Source, TimeOrder, parse_clock_time, to_float, to_int
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.records import LoadReport, RfAttempt
 from uav_fusion.core.site import Site

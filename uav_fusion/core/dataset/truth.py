@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from uav_fusion.core.dataset import (
+from uav_fusion.core.dataset._source import (
     Source,
     TimeOrder,
     parse_clock_time,
