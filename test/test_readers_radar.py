@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from readers_util import ReaderFiles, lines
 
 from uav_fusion.core.dataset import read_radar_jsonl
 from uav_fusion.core.errors import DataError
@@ -46,23 +47,9 @@ def site() -> Site:
     return load_site()
 
 
-def write(tmp_path: Path, content: str | bytes, name: str = "radar_data_1.json") -> Path:
-    p = tmp_path / name
-    if isinstance(content, str):
-        p.write_text(content, encoding="utf-8")
-    else:
-        p.write_bytes(content)
-    return p
-
-
-def lines(*rows: str) -> str:
-    return "\n".join(rows) + "\n"
-
-
-def strict_error(p: Path, site: Site) -> DataError:
-    with pytest.raises(DataError) as ei:
-        read_radar_jsonl(p, site, strict=True)
-    return ei.value
+_FILES = ReaderFiles(read_radar_jsonl, "radar_data_1.json")
+write = _FILES.write
+strict_error = _FILES.strict_error
 
 
 def test_real_format_lines(tmp_path: Path, site: Site) -> None:

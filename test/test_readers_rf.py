@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from readers_util import ReaderFiles, lines
 
 from uav_fusion.core.dataset import read_rf_csv
 from uav_fusion.core.errors import DataError
@@ -48,23 +49,9 @@ def site() -> Site:
     return load_site()
 
 
-def write(tmp_path: Path, content: str | bytes, name: str = "AADM.csv") -> Path:
-    p = tmp_path / name
-    if isinstance(content, str):
-        p.write_text(content, encoding="utf-8")
-    else:
-        p.write_bytes(content)
-    return p
-
-
-def lines(*rows: str) -> str:
-    return "\n".join(rows) + "\n"
-
-
-def strict_error(p: Path, site: Site) -> DataError:
-    with pytest.raises(DataError) as ei:
-        read_rf_csv(p, site, strict=True)
-    return ei.value
+_FILES = ReaderFiles(read_rf_csv, "AADM.csv")
+write = _FILES.write
+strict_error = _FILES.strict_error
 
 
 def test_real_format_rows(tmp_path: Path, site: Site) -> None:

@@ -8,6 +8,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+from readers_util import ReaderFiles, lines
 
 from uav_fusion.core.dataset import read_truth
 from uav_fusion.core.errors import DataError
@@ -40,23 +41,9 @@ def site() -> Site:
     return load_site()
 
 
-def write(tmp_path: Path, content: str | bytes, name: str = "t_vehicleOut.txt") -> Path:
-    p = tmp_path / name
-    if isinstance(content, str):
-        p.write_text(content, encoding="utf-8")
-    else:
-        p.write_bytes(content)
-    return p
-
-
-def lines(*rows: str) -> str:
-    return "\n".join(rows) + "\n"
-
-
-def strict_error(p: Path, site: Site) -> DataError:
-    with pytest.raises(DataError) as ei:
-        read_truth(p, site, strict=True)
-    return ei.value
+_FILES = ReaderFiles(read_truth, "t_vehicleOut.txt")
+write = _FILES.write
+strict_error = _FILES.strict_error
 
 
 def test_real_format_rows(tmp_path: Path, site: Site) -> None:
