@@ -37,7 +37,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock
@@ -64,6 +64,7 @@ from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
 from uav_fusion.core.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
+from uav_fusion.nodes._diagnostics import make_status
 from uav_fusion.params import Param, declare_all, not_empty
 
 M = TypeVar("M")
@@ -327,38 +328,25 @@ class EvaluatorNode(Node):
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         for r in ev.rows:
-            st = DiagnosticStatus()
-            st.level = DiagnosticStatus.OK
-            st.name = f"{self.get_name()}: {r.spec.label}"
-            st.hardware_id = "uav_fusion"
-            st.message = (
+            arr.status.append(make_status(
+                f"{self.get_name()}: {r.spec.label}",
                 f"n={r.stats.count} mean={_num(r.stats.mean)} m "
-                f"coverage={_num(r.stats.coverage_pct)} %"
-            )
-            values = {**r.as_dict()}
-            st.values = [
-                KeyValue(key=str(k), value=str(v))
-                for k, v in values.items()
-                if k not in ("key", "label", "group")
-            ]
-            arr.status.append(st)
-        inp = DiagnosticStatus()
-        inp.name = f"{self.get_name()}: inputs"
-        inp.hardware_id = "uav_fusion"
+                f"coverage={_num(r.stats.coverage_pct)} %",
+                ((str(k), str(v)) for k, v in r.as_dict().items()
+                 if k not in ("key", "label", "group")),
+            ))
         n_drop = sum(ev.dropped.values())
-        inp.level = DiagnosticStatus.WARN if n_drop else DiagnosticStatus.OK
-        inp.message = f"{sum(self.received.values())} messages, {n_drop} dropped"
-        inp.values = [KeyValue(key=f"received {k}", value=str(v)) for k, v in
-                      sorted(self.received.items())]
-        inp.values += [KeyValue(key=f"used {k}", value=str(v)) for k, v in
-                       sorted(self.used.items())]
-        inp.values += [KeyValue(key=f"refused {k}", value=str(v)) for k, v in
-                       sorted(self.refused.items())]
-        inp.values += [KeyValue(key=f"dropped {k}", value=str(v)) for k, v in
-                       sorted(ev.dropped.items())]
-        inp.values.append(KeyValue(key="fused step gaps", value=self.gap_text(ev)))
-        inp.values.append(KeyValue(key="clock jumps back", value=str(self.clock_jumps_back)))
-        arr.status.append(inp)
+        counts = [("received", self.received), ("used", self.used),
+                  ("refused", self.refused), ("dropped", ev.dropped)]
+        values = [(f"{what} {k}", str(v)) for what, c in counts for k, v in sorted(c.items())]
+        values.append(("fused step gaps", self.gap_text(ev)))
+        values.append(("clock jumps back", str(self.clock_jumps_back)))
+        arr.status.append(make_status(
+            f"{self.get_name()}: inputs",
+            f"{sum(self.received.values())} messages, {n_drop} dropped",
+            values,
+            warn=bool(n_drop),
+        ))
         return arr
 
     def _refresh_runtime_params(self) -> None:

@@ -46,7 +46,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock
@@ -60,6 +60,7 @@ from uav_fusion.core.estimator import FusionEstimator, Profile, load_profile
 from uav_fusion.core.records import RADAR, RF, Measurement
 from uav_fusion.core.reorder import Batch, ReorderBuffer
 from uav_fusion.core.site import load_site
+from uav_fusion.nodes._diagnostics import make_status
 from uav_fusion.params import Param, declare_all, not_empty, run_node
 from uav_fusion.replay import stream_qos
 
@@ -490,16 +491,15 @@ class FusionNode(Node):
 
     def publish_diagnostics(self) -> None:
         vals = self.diagnostics()
-        st = DiagnosticStatus()
-        st.name = f"{self.get_name()}: fusion"
-        st.hardware_id = "uav_fusion"
         n_drop = sum(self.dropped.values())
-        st.level = DiagnosticStatus.WARN if n_drop else DiagnosticStatus.OK
-        st.message = f"{self.steps_published} steps, {n_drop} dropped"
-        st.values = [KeyValue(key=k, value=v) for k, v in vals.items()]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [st]
+        arr.status = [make_status(
+            f"{self.get_name()}: fusion",
+            f"{self.steps_published} steps, {n_drop} dropped",
+            vals.items(),
+            warn=bool(n_drop),
+        )]
         self.pub_diag.publish(arr)
 
     def destroy_node(self) -> None:
