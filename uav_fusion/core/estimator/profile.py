@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.radar_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.records import RADAR, RF
+from uav_fusion.core.yamlio import read_yaml_file
 from uav_fusion.resources import config_path
 
 FloatArray = npt.NDArray[np.float64]
@@ -320,10 +320,4 @@ def profile_path(path_or_name: str | Path) -> Path:
 def load_profile(path_or_name: str | Path = "paper") -> Profile:
     """Load a profile by name (``config/profiles/<name>.yaml``) or from a YAML file path."""
     p = profile_path(path_or_name)
-    if not p.is_file():
-        raise ConfigError(f"{p}: profile file not found")
-    try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
-    return profile_from_dict(doc, p)
+    return profile_from_dict(read_yaml_file(p, "profile file"), p)
