@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-import rclpy
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from test_graph_flight import write_flight
@@ -25,14 +23,6 @@ from uav_fusion.replay import stream_qos
 @pytest.fixture(scope="module")
 def flight_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_flight(tmp_path_factory.mktemp("flight") / "short", seconds=30.0)
-
-
-@pytest.fixture()
-def ctx() -> Iterator[Context]:
-    context = Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
 
 
 def _overrides(flight_dir: Path, out: Path, rate: float, rf_delay: float = 0.0) -> dict[str, Any]:

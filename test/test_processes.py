@@ -11,12 +11,11 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -69,14 +68,6 @@ class Procs:
                 p.kill()
                 codes[name] = p.wait()
         return codes
-
-
-@pytest.fixture()
-def ctx() -> Iterator[Context]:
-    context = Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
 
 
 def _spin_until(ex: SingleThreadedExecutor, cond: Callable[[], bool], limit_s: float) -> bool:

@@ -4,12 +4,11 @@ followers, parameters are validated."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import pytest
-import rclpy
 from geometry_msgs.msg import PointStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -30,14 +29,6 @@ from uav_fusion.replay import stream_qos
 @pytest.fixture(scope="module")
 def flight_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_flight(tmp_path_factory.mktemp("flight") / "short", seconds=20.0)
-
-
-@pytest.fixture()
-def ctx() -> Iterator[Context]:
-    context = Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
 
 
 def _params(**kw: Any) -> list[Parameter]:

@@ -7,12 +7,9 @@ one to one, so neither can drift.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import rclpy
-from rclpy.context import Context
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -29,9 +26,3 @@ def short_flight(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_flight(tmp_path_factory.mktemp("faults") / "short", seconds=30.0)
 
 
-@pytest.fixture()
-def ctx() -> Iterator[Context]:
-    context = Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.shutdown(context=context)
