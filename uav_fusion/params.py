@@ -168,7 +168,14 @@ def run_node(
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         while ok():
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except RuntimeError:
+                # A signal shut the context down while a message was being taken (rclpy
+                # then fails inside take_message): that is a normal stop, not a crash.
+                if ok():
+                    raise
+                break
             if done is not None and done(node):
                 break
         return 0

@@ -312,7 +312,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         executor.add_node(node)
         node.start()
         while not node.finished.is_set():
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except RuntimeError:
+                if rclpy.utilities.ok():
+                    raise
+                # a signal shut the context down while a message was being taken
+                raise ExternalShutdownException() from None
         if node.error:
             print(f"bag_player: error: {node.error}", file=sys.stderr)
             code = 1
