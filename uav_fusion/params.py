@@ -13,7 +13,9 @@ functions log it and exit with status 2.
 from __future__ import annotations
 
 import math
+import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -138,6 +140,18 @@ def not_empty(value: Any) -> str | None:
     return None if str(value).strip() else "must not be empty"
 
 
+SHUTDOWN_GRACE_S = 10.0
+
+
+def _exit_after_stuck_shutdown() -> None:
+    print(
+        f"warning: middleware shutdown did not finish within {SHUTDOWN_GRACE_S:g} s; exiting",
+        file=sys.stderr,
+        flush=True,
+    )
+    os._exit(0)
+
+
 def run_node(
     factory: Callable[..., Node],
     args: Sequence[str] | None = None,
@@ -182,6 +196,12 @@ def run_node(
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
     finally:
+        # Bound the middleware's teardown: a node asked to stop must stop, even if DDS
+        # hangs while its peers vanish at the same moment.
+        guard = threading.Timer(SHUTDOWN_GRACE_S, _exit_after_stuck_shutdown)
+        guard.daemon = True
+        guard.start()
         if node is not None:
             node.destroy_node()
         try_shutdown()
+        guard.cancel()
