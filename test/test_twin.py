@@ -226,3 +226,51 @@ def test_tdoa_solver_recovers_exact_position(site) -> None:  # type: ignore[no-u
         assert np.hypot(*(xy - q[:2])) < 0.01
         assert rms < 1e-3
         assert np.all(np.isfinite(cov))
+
+
+def test_hold_at_a_waypoint_hovers_there(site) -> None:  # type: ignore[no-untyped-def]
+    from uav_fusion.core.twin.config import FlightDynamics
+    from uav_fusion.core.twin.trajectory import fly
+
+    doc = {
+        "hold_before_s": 5,
+        "waypoints": [
+            {"e": 0, "n": 0, "alt": 30},
+            {"e": 200, "n": 0, "alt": 30, "hold_s": 40},
+            {"e": 0, "n": 0, "alt": 0},
+        ],
+    }
+    plan = flight_plan_from_dict(doc, site)
+    assert plan.waypoints[1].hold == 40.0
+    tr = fly(plan, site, FlightDynamics(), np.random.default_rng(3))
+    near = np.hypot(tr.pos[:, 0] - 200.0, tr.pos[:, 1]) < 6.0
+    t_near = tr.t[near]
+    # it stays over the spot for the hold (plus the approach and departure inside 6 m)
+    assert 40.0 <= float(t_near[-1] - t_near[0]) < 50.0
+    mid = (tr.t > t_near[0] + 5.0) & (tr.t < t_near[0] + 35.0)
+    speed = np.linalg.norm(tr.vel[mid], axis=1)
+    assert float(np.median(speed)) < 0.15  # inside the radar's Doppler notch most of the time
+    with pytest.raises(ConfigError, match=r"waypoint 1: hold_s must lie"):
+        flight_plan_from_dict({"waypoints": [{"e": 0, "n": 0, "alt": 3, "hold_s": -1}]}, site)
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["zigzag_dash", "west_leg", "out_and_back", "hover_notch", "low_pass", "high_altitude"],
+)
+def test_stress_plans_load_and_fly(site, name: str) -> None:  # type: ignore[no-untyped-def]
+    from uav_fusion.core.twin.config import FlightDynamics
+    from uav_fusion.core.twin.trajectory import fly
+
+    plan = load_flight_plan(config_path(f"waypoints/{name}.yaml"), site)
+    tr = fly(plan, site, FlightDynamics(), np.random.default_rng(1), tail_s=5.0)
+    assert 200.0 < tr.t_landed - tr.t_takeoff < 900.0
+    agl = tr.pos[:, 2] - tr.ground_u
+    speed = np.linalg.norm(tr.vel[:, :2], axis=1)
+    if name == "zigzag_dash":
+        assert float(np.max(speed)) >= 15.0
+    if name == "low_pass":
+        air = tr.t_takeoff + 60.0 < tr.t
+        assert float(np.min(agl[air & (agl > 1.0)])) < 10.0
+    if name == "high_altitude":
+        assert float(np.max(agl)) > 100.0

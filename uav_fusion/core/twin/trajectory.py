@@ -35,6 +35,7 @@ class Waypoint:
     n: float
     alt: float  # metres above the take-off point
     speed: float  # leg speed towards this waypoint, m/s
+    hold: float = 0.0  # seconds spent hovering at this waypoint once reached
 
 
 @dataclass(frozen=True)
@@ -75,7 +76,7 @@ def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> F
         where = f"{src}: waypoint {i}"
         if not isinstance(w, dict):
             raise ConfigError(f"{where}: expected a mapping")
-        unknown = set(w) - {"e", "n", "lat", "lon", "alt", "speed", "note"}
+        unknown = set(w) - {"e", "n", "lat", "lon", "alt", "speed", "hold_s", "note"}
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
         has_enu = "e" in w or "n" in w
@@ -98,7 +99,10 @@ def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> F
         sp = _num(w, "speed", where, speed)
         if not 0.5 <= sp <= 30.0:
             raise ConfigError(f"{where}: speed must lie in [0.5, 30], got {sp}")
-        wps.append(Waypoint(e, n, alt, sp))
+        hold_s = _num(w, "hold_s", where, 0.0)
+        if not 0.0 <= hold_s <= 3600.0:
+            raise ConfigError(f"{where}: hold_s must lie in [0, 3600] s, got {hold_s}")
+        wps.append(Waypoint(e, n, alt, sp, hold_s))
     name = str(doc.get("name", source.stem if source else "flight"))
     return FlightPlan(name, tuple(wps), hold, source)
 
@@ -172,6 +176,8 @@ def fly(
     gust = [0.0, 0.0]
     dt = dyn.dt_s
     targets = [(w.e, w.n, ground + w.alt, w.speed) for w in plan.waypoints]
+    holds = [w.hold for w in plan.waypoints]
+    hold_until = math.nan  # end of the hover at waypoint ``wi`` (nan: not hovering)
     landing = plan.waypoints[-1].alt <= 0.5
     g_a = math.exp(-dt / dyn.wind_gust_tau_s)
     g_b = dyn.wind_gust_mps * math.sqrt(1.0 - g_a * g_a)
@@ -198,7 +204,7 @@ def fly(
             dx, dy, dz = tx - p[0], ty - p[1], tz - p[2]
             dh = math.hypot(dx, dy)
             last = wi == len(targets) - 1
-            if last:
+            if last or holds[wi] > 0.0:
                 v_corner = 0.0
             else:
                 nx, ny = targets[wi + 1][0] - tx, targets[wi + 1][1] - ty
@@ -222,6 +228,9 @@ def fly(
                 v_z = math.copysign(min(dyn.climb_rate_mps, abs(dz) / max(t_h, 1.0)), dz)
             ux, uy = (dx / dh, dy / dh) if dh > 1e-9 else (0.0, 0.0)
             cmd = (v_h * ux, v_h * uy, v_z)
+            if not math.isnan(hold_until):
+                # position hold over the waypoint: a gentle pull back to the spot
+                cmd = (0.2 * dx, 0.2 * dy, 0.5 * dz)
             ax = (cmd[0] - v[0]) / dyn.response_s
             ay = (cmd[1] - v[1]) / dyn.response_s
             az = (cmd[2] - v[2]) / dyn.response_s
@@ -235,7 +244,12 @@ def fly(
             )
             if last and landing and p[2] <= ground + 0.02 and dh < dyn.accept_radius_m:
                 reached = True
+            if reached and holds[wi] > 0.0 and math.isnan(hold_until):
+                hold_until = t + holds[wi]
+            if not math.isnan(hold_until):
+                reached = t >= hold_until
             if reached:
+                hold_until = math.nan
                 wi += 1
                 if wi == len(targets):
                     t_landed = t
@@ -251,7 +265,9 @@ def fly(
             ]
         else:
             gust = [0.0, 0.0]
-        vt = (v[0] + gust[0], v[1] + gust[1], v[2])
+        # in a position hold the autopilot cancels most of the gusts' drift
+        g = 0.2 if not math.isnan(hold_until) else 1.0
+        vt = (v[0] + g * gust[0], v[1] + g * gust[1], v[2])
         ts.append(t)
         ps.append((p[0], p[1], p[2]))
         vs.append(vt)
