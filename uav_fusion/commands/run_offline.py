@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.site import load_site
+from uav_fusion.core.estimator.profile import Profile
+from uav_fusion.core.estimator.track import Step
+from uav_fusion.core.records import Flight
+from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
 HELP = "run the estimator over a flight folder and write every filter step to CSV"
@@ -24,6 +28,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
     parser.add_argument("--out", help="CSV file for the steps (one row per measurement)")
+    parser.add_argument(
+        "--grid",
+        metavar="FILE",
+        help="CSV file for the fixed-rate output: one row per grid epoch over the truth's span "
+        "(what the system publishes then; docs/benchmark.md)",
+    )
+    parser.add_argument(
+        "--grid-hz", type=float, default=10.0, help="rate of --grid (default: 10 Hz)"
+    )
     parser.add_argument(
         "--rf-file", default="AADM.csv", help="RF CSV name inside the folder (default: AADM.csv)"
     )
@@ -109,4 +122,32 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         path = result.write_csv(args.out)
         print(f"steps: {path}")
+    if args.grid:
+        write_grid(result.steps, flight, profile, site, args.grid, args.grid_hz)
     return 0
+
+
+def write_grid(
+    steps: list[Step], flight: Flight, profile: Profile, site: Site, path: str, hz: float
+) -> None:
+    """The run's fixed-rate output over the truth's span (the steps' span without truth)."""
+    from uav_fusion.core.grid import grid_from_steps
+    from uav_fusion.core.gridscore import FlightTruth
+
+    if not (math.isfinite(hz) and hz > 0):
+        raise ConfigError(f"--grid-hz must be > 0, got {hz}")
+    t0, t1 = FlightTruth.from_flight(flight, site).span
+    if not t1 > t0:
+        ts = [s.t for s in steps if math.isfinite(s.t)]
+        if not ts:
+            raise ConfigError("--grid: the run has no steps and the flight no truth")
+        t0, t1 = min(ts), max(ts)
+    grid = grid_from_steps(steps, profile, hz, t0, t1)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    grid.write_csv(str(out))
+    n_pub = int(grid.published.sum())
+    print(
+        f"grid: {out}: {len(grid)} epochs at {hz:g} Hz, {n_pub} with a published track "
+        f"(max coast {profile.max_coast_s} s), {grid.restarts} track restarts"
+    )
