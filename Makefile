@@ -12,7 +12,7 @@ DEV_STAMP := $(VENV)/.dev-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 DOMAIN = $${ROS_DOMAIN_ID:-$$(( RANDOM % 100 + 1 ))}
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench bench-accuracy clean
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -38,6 +38,10 @@ lint: $(DEV_STAMP)
 
 bench: $(DEV_STAMP)
 	ROS_DOMAIN_ID=$(DOMAIN) $(PY) scripts/bench_filter.py
+
+# the accuracy benchmark's test half (docs/benchmark.md); BENCH_ARGS e.g. "--profiles paper tracker"
+bench-accuracy: $(RUNTIME_STAMP)
+	$(VENV)/bin/uav_fusion bench $(BENCH_ARGS)
 
 clean:
 	rm -rf build install log out .pytest_cache .mypy_cache .ruff_cache

@@ -38,6 +38,7 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/launch", glob("launch/*.py")),
         *tree("config"),
+        *tree("bench"),
         *tree("data"),
         *tree("bags"),
     ],

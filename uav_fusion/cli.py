@@ -1,4 +1,4 @@
-"""``uav_fusion``: the package's command line tool (generate, calibrate, run, demo, ...)."""
+"""``uav_fusion``: the package's command line tool (generate, calibrate, run, demo, bench, ...)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "evaluate": "evaluate",
     "convert": "convert",
     "demo": "demo",
+    "bench": "bench",
 }
 
 

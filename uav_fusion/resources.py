@@ -1,4 +1,5 @@
-"""Locate the package's shipped files (config/, data/, bags/) in a source tree or an install."""
+"""Locate the package's shipped files (config/, bench/, data/, bags/) in a source tree or an
+install."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ PACKAGE = "uav_fusion"
 
 
 def share_dir() -> Path:
-    """Directory holding config/, data/ and bags/.
+    """Directory holding config/, bench/, data/ and bags/.
 
     In a source checkout (or an editable install) that is the repository root; in a colcon or
     pip install it is ``<prefix>/share/uav_fusion``.
@@ -33,6 +34,11 @@ def share_dir() -> Path:
 def config_path(name: str) -> Path:
     """Path of a file under config/."""
     return share_dir() / "config" / name
+
+
+def bench_path(name: str) -> Path:
+    """Path of a file under bench/ (benchmark definitions)."""
+    return share_dir() / "bench" / name
 
 
 def data_path(name: str) -> Path:

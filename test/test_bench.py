@@ -1,0 +1,164 @@
+"""The accuracy benchmark: definition checks, the flight cache, the command end to end."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from uav_fusion.cli import main
+from uav_fusion.core.bench.cache import LABELS_FILE, cached_flights, generate_flight, read_labels
+from uav_fusion.core.bench.definition import load_definition
+from uav_fusion.core.bench.run import ScoreTask, score_task
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.estimator import load_profile
+from uav_fusion.core.site import load_site
+from uav_fusion.resources import DEFAULT_SITE, config_path
+
+SITE_FILE = config_path(DEFAULT_SITE)
+
+
+def write_def(tmp_path: Path, doc: dict[str, object], name: str = "def.yaml") -> Path:
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    return p
+
+
+def tiny(**changes: object) -> dict[str, object]:
+    doc: dict[str, object] = {
+        "name": "tiny",
+        "plans": ["zigzag_dash"],
+        "splits": {"tune": [3], "test": [4, 5]},
+        "duration_s": 60.0,
+    }
+    doc.update(changes)
+    return doc
+
+
+def test_the_shipped_definition_has_16_flights_per_half_without_the_default_flight() -> None:
+    d = load_definition()
+    assert len(d.plans) == 8
+    tune, test = d.flights("tune"), d.flights("test")
+    assert len(tune) == len(test) == 16
+    ids = {f.flight_id for f in tune} | {f.flight_id for f in test}
+    assert len(ids) == 32
+    assert "lake_wheeler_default-s1" not in ids
+    assert not {f.seed for f in tune} & {f.seed for f in test}
+    known = {p.stem for p in config_path("waypoints").glob("*.yaml")}
+    assert {p.name for p in d.plans} == known
+    assert d.grid_hz == 10.0 and d.settings.gross_error_m == 100.0
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"plans": ["zigzag_dash", "no_such_plan"]}, r"plans\[1\]: unknown plan 'no_such_plan'"),
+        ({"splits": {"tune": [3, 4], "test": [4, 5]}}, r"splits.test: seed\(s\) 4 also in"),
+        (
+            {"plans": ["lake_wheeler_default"], "splits": {"tune": [1], "test": [2]}},
+            r"splits.tune: seed 1 with plan 'lake_wheeler_default' is the default flight",
+        ),
+        ({"seeds": [1]}, r"unknown key 'seeds'"),
+        ({"scoring": {"grid_hz": 10, "gross_m": 50}}, r"unknown key 'scoring.gross_m'"),
+        ({"splits": {"tune": [3], "test": [4], "val": [6]}}, r"unknown key 'splits.val'"),
+        ({"splits": {"tune": [3]}}, r"splits.test is missing"),
+        ({"splits": {"tune": [3], "test": ["x"]}}, r"splits.test\[0\] must be an integer"),
+        ({"scoring": {"grid_hz": 0}}, r"grid_hz must be > 0"),
+        ({"plans": "zigzag_dash"}, r"plans must be a non-empty list"),
+        ({"twin_config": "missing.yaml"}, r"twin_config: file .*missing.yaml not found"),
+    ],
+)
+def test_bad_definitions_stop_naming_the_file_and_key(
+    tmp_path: Path, changes: dict[str, object], message: str
+) -> None:
+    p = write_def(tmp_path, tiny(**changes))
+    with pytest.raises(ConfigError, match=message) as info:
+        load_definition(p)
+    assert str(p) in str(info.value)
+
+
+def test_cached_flights_are_deterministic_and_keyed_by_their_inputs(tmp_path: Path) -> None:
+    site = load_site()
+    d = load_definition(write_def(tmp_path, tiny(duration_s=40.0)))
+    a = cached_flights(d, "tune", tmp_path / "a", SITE_FILE)[0]
+    b = cached_flights(d, "tune", tmp_path / "b", SITE_FILE)[0]
+    assert a.key == b.key and a.folder.name == b.folder.name
+    assert generate_flight(a, d, site) == (a.folder, True)
+    assert generate_flight(a, d, site) == (a.folder, False)  # cached
+    generate_flight(b, d, site)
+    files = sorted(p.name for p in a.folder.iterdir())
+    assert LABELS_FILE in files and len(files) == 5
+    for name in files:
+        assert (a.folder / name).read_bytes() == (b.folder / name).read_bytes(), name
+    assert not list((tmp_path / "a").glob(".tmp-*"))
+    labels = read_labels(a.folder)
+    assert labels.size > 0 and np.all(np.diff(labels) >= 0)
+    # another seed, duration, plan file or twin configuration: another key
+    keys = {a.key, cached_flights(d, "test", tmp_path / "a", SITE_FILE)[0].key}
+    d2 = load_definition(write_def(tmp_path, tiny(duration_s=41.0), "d2.yaml"))
+    keys.add(cached_flights(d2, "tune", tmp_path, SITE_FILE)[0].key)
+    twin = tmp_path / "twin.yaml"
+    twin.write_text(config_path("twin_default.yaml").read_text() + "\n# changed\n")
+    d3 = load_definition(write_def(tmp_path, tiny(duration_s=40.0, twin_config=str(twin)), "d3"))
+    keys.add(cached_flights(d3, "tune", tmp_path, SITE_FILE)[0].key)
+    plan = tmp_path / "zigzag_dash.yaml"
+    plan.write_text(config_path("waypoints/zigzag_dash.yaml").read_text() + "\n# changed\n")
+    d4 = load_definition(write_def(tmp_path, tiny(duration_s=40.0, plans=[str(plan)]), "d4"))
+    keys.add(cached_flights(d4, "tune", tmp_path, SITE_FILE)[0].key)
+    assert len(keys) == 5
+
+
+def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two short flights, the paper profile and a second profile file, one thread worker."""
+    definition = write_def(tmp_path, tiny())
+    other = tmp_path / "fast_q.yaml"
+    doc = load_profile("paper").as_dict()
+    doc["name"] = "paper_q8"
+    doc["motion"]["q"] = [8.0, 8.0, 8.0]
+    other.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    argv = [
+        "bench", "--definition", str(definition), "--profiles", "paper", str(other),
+        "--out", str(out), "--cache", str(cache), "--workers", "1", "--threads",
+    ]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "2 flights cached, 0 to generate" not in text
+    assert "0 flights cached, 2 to generate" in text
+    table = text[text.index("pooled over 2 test flights") :]
+    assert "\npaper " in table and "\npaper_q8 " in table
+    assert "commit:" in text and "dask 2026.8.0" in text and "wall time" in text
+    with (out / "per_flight.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert sorted((r["profile"], r["flight"]) for r in rows) == [
+        ("paper", "zigzag_dash-s4"), ("paper", "zigzag_dash-s5"),
+        ("paper_q8", "zigzag_dash-s4"), ("paper_q8", "zigzag_dash-s5"),
+    ]
+    assert (out / "bench_accuracy.png").stat().st_size > 10_000
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["provenance"]["split"] == "test"
+    assert set(summary["pooled"]) == {"paper", "paper_q8"}
+    md = (out / "table.md").read_text().splitlines()
+    assert len(md) == 4 and md[2].startswith("| paper |")
+    # the command's figures are the task's, computed here directly
+    d = load_definition(definition)
+    cf = cached_flights(d, "test", cache, SITE_FILE)[0]
+    r = score_task(ScoreTask(cf, load_profile("paper"), load_site(), d.grid_hz, d.settings))
+    row = next(x for x in rows if x["profile"] == "paper" and x["flight"] == cf.flight_id)
+    assert int(row["epochs"]) == r.samples.epochs > 0
+    cov = 100 * r.samples.covered / r.samples.epochs
+    assert float(row["coverage_pct"]) == pytest.approx(cov, abs=1e-4)
+    # warm cache: nothing generated again
+    assert main(argv) == 0
+    assert "2 flights cached, 0 to generate" in capsys.readouterr().out
+
+
+def test_bench_command_rejects_duplicate_profile_names(tmp_path: Path) -> None:
+    definition = write_def(tmp_path, tiny())
+    argv = ["bench", "--definition", str(definition), "--profiles", "paper", "paper",
+            "--out", str(tmp_path / "o"), "--cache", str(tmp_path / "c")]
+    assert main(argv) == 2

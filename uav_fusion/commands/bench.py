@@ -1,0 +1,163 @@
+"""``uav_fusion bench``: the accuracy benchmark (docs/benchmark.md).
+
+Generates the definition's flights into the cache (once), runs every listed profile over every
+flight of the split in parallel on a Dask cluster, scores each run's fixed-rate output, prints
+one table (a row per profile, the pooled figures) with provenance, and writes the per-flight
+CSV, the figure, the table in Markdown and a JSON summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from uav_fusion.core.bench.cache import cached_flights
+from uav_fusion.core.bench.definition import SPLITS, load_definition
+from uav_fusion.core.bench.report import (
+    CSV_FILE,
+    FIGURE_FILE,
+    JSON_FILE,
+    TABLE_FILE,
+    markdown_table,
+    pooled,
+    provenance,
+    provenance_lines,
+    text_table,
+    write_csv,
+    write_figure,
+    write_summary_json,
+)
+from uav_fusion.core.bench.run import GenerateTask, ScoreTask, generate_task, score_task
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.estimator.profile import load_profile, profile_path
+from uav_fusion.core.site import load_site
+from uav_fusion.resources import DEFAULT_SITE, config_path
+
+HELP = "accuracy benchmark: profiles x generated flights (tune/test split), fixed-rate scores"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--definition",
+        help="benchmark definition: a name under bench/ or a YAML path (default: "
+        "bench/accuracy.yaml)",
+    )
+    parser.add_argument(
+        "--profiles",
+        nargs="+",
+        default=["paper"],
+        metavar="PROFILE",
+        help="estimator profiles: names (config/profiles/<name>.yaml) or YAML paths "
+        "(default: paper)",
+    )
+    parser.add_argument(
+        "--split", choices=SPLITS, default="test", help="which half to run (default: test)"
+    )
+    parser.add_argument(
+        "--out", help="output folder (default: out/bench/<definition>-<split>)"
+    )
+    parser.add_argument(
+        "--cache", default="out/bench_cache", help="flight cache folder (default: out/bench_cache)"
+    )
+    parser.add_argument(
+        "--workers", type=int, help="local worker processes (default: one per core)"
+    )
+    parser.add_argument(
+        "--scheduler", metavar="ADDRESS", help="use an existing Dask cluster (e.g. tcp://host:8786)"
+    )
+    parser.add_argument(
+        "--threads",
+        action="store_true",
+        help="local workers as threads of this process instead of processes (for debugging)",
+    )
+    parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
+    parser.add_argument("--no-figure", action="store_true", help="do not draw the figure")
+
+
+def run(args: argparse.Namespace) -> int:
+    from uav_fusion.batch import Engine
+
+    wall0 = time.perf_counter()
+    definition = load_definition(args.definition)
+    profiles = [load_profile(p) for p in args.profiles]
+    names = [p.name for p in profiles]
+    for p, arg in zip(profiles, args.profiles, strict=True):
+        if names.count(p.name) > 1:
+            raise ConfigError(
+                f"{profile_path(arg)}: profile name {p.name!r} is used by two of the listed "
+                "profiles (the table's rows are named by it)"
+            )
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    site_file = Path(args.site) if args.site else config_path(DEFAULT_SITE)
+    site = load_site(site_file)
+    cache = Path(args.cache)
+    flights = cached_flights(definition, args.split, cache, site_file)
+    out = Path(args.out) if args.out else Path("out/bench") / f"{definition.name}-{args.split}"
+    out.mkdir(parents=True, exist_ok=True)
+    missing = [f for f in flights if not f.exists()]
+    print(
+        f"bench {definition.name} ({definition.source}): split {args.split}, "
+        f"{len(flights)} flights ({len(definition.plans)} plans x "
+        f"{len(definition.splits[args.split])} seeds), profiles {', '.join(names)}"
+    )
+    print(
+        f"  cache {cache}: {len(flights) - len(missing)} flights cached, "
+        f"{len(missing)} to generate"
+    )
+    engine = Engine(
+        workers=args.workers, scheduler=args.scheduler, processes=not args.threads
+    )
+    with engine:
+        print(f"  engine: {engine.description}")
+        t0 = time.perf_counter()
+        engine.map(
+            generate_task,
+            [GenerateTask(f, definition, site) for f in missing],
+            label="generate",
+            describe=lambda t: t.flight.flight_id,
+        )
+        t_gen = time.perf_counter() - t0
+        tasks = [
+            ScoreTask(f, p, site, definition.grid_hz, definition.settings)
+            for p in profiles
+            for f in flights
+        ]
+        t0 = time.perf_counter()
+        results = engine.map(
+            score_task,
+            tasks,
+            label="run+score",
+            describe=lambda t: f"{t.profile.name} on {t.flight.flight_id}",
+        )
+        t_run = time.perf_counter() - t0
+    settings = definition.settings
+    scores = pooled(results, settings)
+    prov = provenance(
+        args.split,
+        len(flights),
+        definition.source,
+        {"profiles": ", ".join(f"{p.name} ({p.source})" for p in profiles)},
+    )
+    print()
+    print(f"pooled over {len(flights)} {args.split} flights, {definition.grid_hz:g} Hz grid, "
+          f"airborne epochs (truth > {settings.airborne_min_m:g} m above take-off):")
+    print(text_table(scores))
+    print()
+    for line in provenance_lines(prov):
+        print(f"  {line}")
+    csv_path = write_csv(results, settings, out / CSV_FILE)
+    table_path = out / TABLE_FILE
+    table_path.write_text(markdown_table(scores) + "\n", encoding="utf-8")
+    json_path = write_summary_json(scores, prov, out / JSON_FILE)
+    print(f"per-flight figures: {csv_path}")
+    print(f"table (Markdown): {table_path}; summary: {json_path}")
+    if not args.no_figure:
+        print(f"figure: {write_figure(results, settings, out / FIGURE_FILE)}")
+    wall = time.perf_counter() - wall0
+    print(
+        f"wall time {wall:.1f} s (generation {t_gen:.1f} s for {len(missing)} flights, "
+        f"runs {t_run:.1f} s for {len(tasks)} profile x flight tasks)"
+    )
+    return 0

@@ -1,0 +1,158 @@
+"""The benchmark's flight cache: generated on demand, keyed by what makes a flight.
+
+A flight is generated with the digital twin into ``<cache>/<plan>-s<seed>-<key>/`` (the three
+Dataset-28 files, the twin's manifest, and ``bench_labels.json``). ``key`` is a hash of
+everything that decides the flight's bytes: the plan file, the twin parameter file and the
+site file (their contents), the twin's source code, the seed and the duration override; so a
+changed twin or plan gives a new folder and an old folder is never used for it. Generation is
+deterministic (same inputs, same bytes) and atomic (written to a temporary folder, then
+renamed), so parallel workers and interrupted runs cannot leave a half-written flight behind.
+
+``bench_labels.json`` holds what only the twin knows: the times (on the flight's radar
+timeline, unix seconds) of every radar report of a track that was following the UAV
+(``SimTrackReport.kind == UAV``), from which the scorer finds the radar-observable epochs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from uav_fusion.core.bench.definition import BenchDefinition, BenchFlight
+from uav_fusion.core.errors import DataError
+from uav_fusion.core.site import Site
+from uav_fusion.core.twin import radar_model
+from uav_fusion.core.twin.config import load_twin_config
+from uav_fusion.core.twin.generate import TwinFlight, generate_twin
+from uav_fusion.core.twin.trajectory import load_flight_plan
+from uav_fusion.core.twin.writers import write_twin
+
+FloatArray = npt.NDArray[np.float64]
+
+LABELS_FILE = "bench_labels.json"
+CACHE_FORMAT = 1  # bump when the cached folder's layout changes
+_TWIN_SOURCE = Path(radar_model.__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class CachedFlight:
+    """Where a benchmark flight lives (or will live) in the cache."""
+
+    flight: BenchFlight
+    key: str
+    folder: Path
+
+    @property
+    def flight_id(self) -> str:
+        return self.flight.flight_id
+
+    def exists(self) -> bool:
+        return (self.folder / LABELS_FILE).is_file()
+
+
+def _digest(h: hashlib._Hash, label: str, data: bytes) -> None:
+    h.update(f"{label}:{len(data)}:".encode())
+    h.update(data)
+
+
+def twin_source_digest() -> str:
+    """Hash of the twin's source files (a change in the simulation changes every key)."""
+    h = hashlib.sha256()
+    for p in sorted(_TWIN_SOURCE.glob("*.py")):
+        _digest(h, p.name, p.read_bytes())
+    return h.hexdigest()
+
+
+def flight_key(
+    flight: BenchFlight, definition: BenchDefinition, site_file: Path, twin_digest: str
+) -> str:
+    """The cache key of ``flight`` (16 hex digits)."""
+    h = hashlib.sha256()
+    _digest(h, "format", str(CACHE_FORMAT).encode())
+    _digest(h, "plan", flight.plan.path.read_bytes())
+    _digest(h, "twin_config", definition.twin_config.read_bytes())
+    _digest(h, "site", site_file.read_bytes())
+    _digest(h, "twin_source", twin_digest.encode())
+    _digest(h, "seed", str(flight.seed).encode())
+    _digest(h, "duration", repr(definition.duration_s).encode())
+    return h.hexdigest()[:16]
+
+
+def cached_flights(
+    definition: BenchDefinition, split: str, cache_dir: Path, site_file: Path
+) -> list[CachedFlight]:
+    """The split's flights with their cache folders (generated or not)."""
+    digest = twin_source_digest()
+    out = []
+    for f in definition.flights(split):
+        key = flight_key(f, definition, site_file, digest)
+        out.append(CachedFlight(f, key, cache_dir / f"{f.flight_id}-{key}"))
+    return out
+
+
+def uav_report_times(twin: TwinFlight) -> list[float]:
+    """Times (the flight's radar timeline) of the radar reports of tracks on the UAV."""
+    offset = twin.site.clock_offset_s("radar")
+    return [
+        f.t_unix - offset
+        for f in twin.radar
+        if any(tr.report.kind == radar_model.UAV for tr in f.tracks)
+    ]
+
+
+def write_labels(twin: TwinFlight, folder: Path, flight: BenchFlight, key: str) -> Path:
+    doc = {
+        "flight": flight.flight_id,
+        "plan": flight.plan.name,
+        "seed": flight.seed,
+        "key": key,
+        "uav_radar_report_times": uav_report_times(twin),
+    }
+    path = folder / LABELS_FILE
+    path.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    return path
+
+
+def read_labels(folder: Path) -> FloatArray:
+    """The UAV radar report times of a cached flight."""
+    path = folder / LABELS_FILE
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        times = doc["uav_radar_report_times"]
+        return np.asarray(times, dtype=float).reshape(-1)
+    except FileNotFoundError:
+        raise DataError(path, None, "benchmark labels not found") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise DataError(path, None, f"unreadable benchmark labels: {exc}") from None
+
+
+def generate_flight(
+    cf: CachedFlight, definition: BenchDefinition, site: Site
+) -> tuple[Path, bool]:
+    """Make sure ``cf`` is in the cache; returns (folder, generated now)."""
+    if cf.exists():
+        return cf.folder, False
+    cf.folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = cf.folder.parent / f".tmp-{cf.folder.name}-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    cfg = load_twin_config(definition.twin_config)
+    plan = load_flight_plan(cf.flight.plan.path, site)
+    twin = generate_twin(site, cfg, plan, seed=cf.flight.seed, duration_s=definition.duration_s)
+    write_twin(twin, tmp)
+    write_labels(twin, tmp, cf.flight, cf.key)
+    try:
+        tmp.rename(cf.folder)
+    except OSError:
+        if not cf.exists():  # not a concurrent writer that finished first
+            raise
+        shutil.rmtree(tmp, ignore_errors=True)
+        return cf.folder, False
+    return cf.folder, True

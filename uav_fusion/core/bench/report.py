@@ -1,0 +1,217 @@
+"""The benchmark's outputs: the pooled table, the per-flight CSV, the figure, provenance."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import platform
+import subprocess
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from uav_fusion.core.bench.run import FlightResult
+from uav_fusion.core.gridscore import (
+    TABLE_COLUMNS,
+    GridScore,
+    ScoreSettings,
+    format_value,
+    pool,
+)
+from uav_fusion.resources import share_dir
+
+FIGURE_DPI = 110
+CSV_FILE = "per_flight.csv"
+FIGURE_FILE = "bench_accuracy.png"
+TABLE_FILE = "table.md"
+JSON_FILE = "summary.json"
+VERSION_PACKAGES = ("uav_fusion", "numpy", "scipy", "dask", "distributed")
+
+
+def pooled(results: Sequence[FlightResult], settings: ScoreSettings) -> dict[str, GridScore]:
+    """Pooled figures per profile, in the order the profiles first appear."""
+    by: dict[str, list[FlightResult]] = {}
+    for r in results:
+        by.setdefault(r.profile, []).append(r)
+    return {p: pool([r.samples for r in rs], settings) for p, rs in by.items()}
+
+
+def git_commit(root: Path | None = None) -> str:
+    """``<hash>`` of the source tree (``+dirty`` with uncommitted changes), or "unknown"."""
+    root = root or share_dir()
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True, text=True, timeout=10, check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True, text=True, timeout=10, check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown (not a git checkout)"
+    return head + ("+dirty" if dirty else "")
+
+
+def versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for name in VERSION_PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def provenance(
+    split: str, flights: int, definition: Path, extra: Mapping[str, str] | None = None
+) -> dict[str, Any]:
+    doc: dict[str, Any] = {
+        "date": datetime.now(tz=UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "commit": git_commit(),
+        "split": split,
+        "flights": flights,
+        "definition": str(definition),
+        "versions": versions(),
+    }
+    doc.update(extra or {})
+    return doc
+
+
+def provenance_lines(prov: Mapping[str, Any]) -> list[str]:
+    lines = []
+    for k, v in prov.items():
+        if isinstance(v, Mapping):
+            v = ", ".join(f"{a} {b}" for a, b in v.items())
+        lines.append(f"{k}: {v}")
+    return lines
+
+
+def text_table(scores: Mapping[str, GridScore]) -> str:
+    """The pooled figures, one row per profile (fixed-width, for terminals)."""
+    heads = ["profile"] + [h for _, h, _ in TABLE_COLUMNS]
+    rows = [
+        [name] + [format_value(getattr(s, f), fmt) for f, _, fmt in TABLE_COLUMNS]
+        for name, s in scores.items()
+    ]
+    widths = [max(len(r[i]) for r in [heads, *rows]) for i in range(len(heads))]
+
+    def line(cells: list[str]) -> str:
+        pairs = zip(cells, widths, strict=True)
+        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(pairs))
+
+    out = [line(heads), "  ".join("-" * w for w in widths)]
+    out += [line(r) for r in rows]
+    return "\n".join(out)
+
+
+def markdown_table(scores: Mapping[str, GridScore]) -> str:
+    heads = ["profile"] + [h for _, h, _ in TABLE_COLUMNS]
+    out = ["| " + " | ".join(heads) + " |", "|---|" + "---:|" * len(TABLE_COLUMNS)]
+    for name, s in scores.items():
+        cells = [name] + [format_value(getattr(s, f), fmt) for f, _, fmt in TABLE_COLUMNS]
+        out.append("| " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+CSV_FIELDS = (
+    "profile", "flight", "plan", "seed", "split", "epochs", "coverage_pct",
+    "fresh_coverage_pct", "err_mean_m", "err_p50_m", "err_p95_m", "err_max_m", "gross_pct",
+    "observable_epochs", "observable_coverage_pct", "observable_gross_pct", "anees",
+    "nees_in95_pct", "ttf_s", "restarts", "steps", "seconds",
+)
+
+
+def per_flight_scores(
+    results: Sequence[FlightResult], settings: ScoreSettings
+) -> list[tuple[FlightResult, GridScore]]:
+    return [(r, pool([r.samples], settings)) for r in results]
+
+
+def write_csv(
+    results: Sequence[FlightResult], settings: ScoreSettings, path: Path
+) -> Path:
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(CSV_FIELDS))
+        w.writeheader()
+        for r, s in per_flight_scores(results, settings):
+            d: dict[str, Any] = {
+                "profile": r.profile, "flight": r.flight_id, "plan": r.plan, "seed": r.seed,
+                "split": r.split, "steps": r.steps, "seconds": f"{r.seconds:.3f}",
+            }
+            for k, v in s.as_dict().items():
+                if k in CSV_FIELDS and k not in d:
+                    d[k] = "" if isinstance(v, float) and not math.isfinite(v) else (
+                        f"{v:.4f}" if isinstance(v, float) else v
+                    )
+            w.writerow(d)
+    return path
+
+
+def write_summary_json(
+    scores: Mapping[str, GridScore], prov: Mapping[str, Any], path: Path
+) -> Path:
+    def clean(d: dict[str, Any]) -> dict[str, Any]:
+        return {
+            k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in d.items()
+        }
+
+    doc = {"provenance": dict(prov), "pooled": {p: clean(s.as_dict()) for p, s in scores.items()}}
+    path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    return path
+
+
+def write_figure(
+    results: Sequence[FlightResult], settings: ScoreSettings, path: Path
+) -> Path:
+    """Error CDF per profile (pooled); coverage and gross-error share per flight and profile."""
+    profiles = list(dict.fromkeys(r.profile for r in results))
+    flights = list(dict.fromkeys(r.flight_id for r in results))
+    fig = Figure(figsize=(11.0, 10.0), dpi=FIGURE_DPI)
+    FigureCanvasAgg(fig)
+    ax_cdf = fig.add_subplot(3, 1, 1)
+    ax_cov = fig.add_subplot(3, 1, 2)
+    ax_gross = fig.add_subplot(3, 1, 3)
+    for p in profiles:
+        err = np.sort(np.concatenate([r.samples.errors for r in results if r.profile == p]))
+        if err.size:
+            y = np.arange(1, err.size + 1) / err.size
+            ax_cdf.plot(np.maximum(err, 1e-2), y, label=f"{p} (n={err.size} epochs)")
+    ax_cdf.set_xscale("log")
+    ax_cdf.axvline(settings.gross_error_m, color="grey", ls="--", lw=0.8)
+    ax_cdf.set_xlabel("3D error of the published track at covered airborne epochs (m)")
+    ax_cdf.set_ylabel("CDF")
+    ax_cdf.grid(True, which="both", alpha=0.3)
+    if profiles:
+        ax_cdf.legend(loc="lower right", fontsize=8)
+    width = 0.8 / max(1, len(profiles))
+    x = np.arange(len(flights))
+    scores = {(r.profile, r.flight_id): pool([r.samples], settings) for r in results}
+    for j, p in enumerate(profiles):
+        cov = [scores[(p, f)].coverage_pct if (p, f) in scores else np.nan for f in flights]
+        gross = [scores[(p, f)].gross_pct if (p, f) in scores else np.nan for f in flights]
+        off = (j - (len(profiles) - 1) / 2) * width
+        ax_cov.bar(x + off, cov, width, label=p)
+        ax_gross.bar(x + off, gross, width, label=p)
+    for ax, lab in (
+        (ax_cov, "coverage (% of airborne epochs)"),
+        (ax_gross, f"gross errors (> {settings.gross_error_m:g} m, % of covered)"),
+    ):
+        ax.set_xticks(x)
+        ax.set_xticklabels(flights, rotation=45, ha="right", fontsize=7)
+        ax.set_ylabel(lab, fontsize=8)
+        ax.grid(True, axis="y", alpha=0.3)
+        if profiles:
+            ax.legend(fontsize=7)
+    ax_cov.set_ylim(0, 100)
+    fig.tight_layout()
+    fig.savefig(path, format="png", dpi=FIGURE_DPI)
+    return path
