@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 
 SITE_FILE = config_path(DEFAULT_SITE)
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def write_def(tmp_path: Path, doc: dict[str, object], name: str = "def.yaml") -> Path:
@@ -143,7 +145,8 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert summary["provenance"]["split"] == "test"
     assert set(summary["pooled"]) == {"paper", "paper_q8"}
     md = (out / "table.md").read_text().splitlines()
-    assert len(md) == 4 and md[2].startswith("| paper |")
+    assert md[2].startswith("| paper |") and md[3].startswith("| paper_q8 |") and md[4] == ""
+    assert [x.split(" | ")[1] for x in md[7:]] == ["zigzag_dash-s4", "zigzag_dash-s5"] * 2
     # the command's figures are the task's, computed here directly
     d = load_definition(definition)
     cf = cached_flights(d, "test", cache, SITE_FILE)[0]
@@ -155,6 +158,19 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     # warm cache: nothing generated again
     assert main(argv) == 0
     assert "2 flights cached, 0 to generate" in capsys.readouterr().out
+    # the README block is regenerated from the output folder
+    readme = tmp_path / "README.md"
+    readme.write_text(
+        "# x\n<!-- bench-accuracy:begin -->\nold\n<!-- bench-accuracy:end -->\nafter\n"
+    )
+    spec = importlib.util.spec_from_file_location("ubr", ROOT / "scripts/update_bench_readme.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.main([str(out), "--readme", str(readme)]) == 0
+    new = readme.read_text()
+    assert "old" not in new and new.endswith("<!-- bench-accuracy:end -->\nafter\n")
+    assert "`uav_fusion bench --profiles paper paper_q8`" in new and md[2] in new
 
 
 def test_bench_command_rejects_duplicate_profile_names(tmp_path: Path) -> None:

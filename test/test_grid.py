@@ -124,6 +124,7 @@ def test_gap_coast_beyond_the_maximum_restart_and_gross_error_by_hand() -> None:
     assert sc.gross_pct == pytest.approx(25.0)
     assert sc.ttf_s == pytest.approx(1.0)
     assert sc.restarts == 1
+    assert sc.gross_vertical_pct == 100.0 and sc.gross_age_p50_s == 0.0
     # NEES by hand: e = (0, dt, 0), P_pos = (4 + dt^2) I; the restart: 200^2 / 4
     hand = [dt**2 / (4 + dt**2) for dt in (0.5, 1.5, 2.5)] + [200.0**2 / 4]
     assert sc.anees == pytest.approx(np.mean(hand))

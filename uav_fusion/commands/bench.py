@@ -19,6 +19,7 @@ from uav_fusion.core.bench.report import (
     FIGURE_FILE,
     JSON_FILE,
     TABLE_FILE,
+    markdown_flights,
     markdown_table,
     pooled,
     provenance,
@@ -110,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers, scheduler=args.scheduler, processes=not args.threads
     )
     with engine:
-        print(f"  engine: {engine.description}")
+        engine_desc = engine.description
+        print(f"  engine: {engine_desc}")
         t0 = time.perf_counter()
         engine.map(
             generate_task,
@@ -149,15 +151,20 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {line}")
     csv_path = write_csv(results, settings, out / CSV_FILE)
     table_path = out / TABLE_FILE
-    table_path.write_text(markdown_table(scores) + "\n", encoding="utf-8")
-    json_path = write_summary_json(scores, prov, out / JSON_FILE)
+    table_path.write_text(
+        markdown_table(scores) + "\n\n" + markdown_flights(results, settings) + "\n",
+        encoding="utf-8",
+    )
     print(f"per-flight figures: {csv_path}")
-    print(f"table (Markdown): {table_path}; summary: {json_path}")
     if not args.no_figure:
         print(f"figure: {write_figure(results, settings, out / FIGURE_FILE)}")
     wall = time.perf_counter() - wall0
-    print(
-        f"wall time {wall:.1f} s (generation {t_gen:.1f} s for {len(missing)} flights, "
-        f"runs {t_run:.1f} s for {len(tasks)} profile x flight tasks)"
+    timing = (
+        f"{wall:.1f} s (generation {t_gen:.1f} s for {len(missing)} flights, "
+        f"runs {t_run:.1f} s for {len(tasks)} profile x flight tasks; {engine_desc})"
     )
+    prov["wall_time"] = timing
+    json_path = write_summary_json(scores, prov, out / JSON_FILE)
+    print(f"table (Markdown): {table_path}; summary: {json_path}")
+    print(f"wall time {timing}")
     return 0

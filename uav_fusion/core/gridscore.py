@@ -23,7 +23,10 @@ Per flight, and pooled over flights (:func:`pool`):
 * ``ttf_s``: time from the first airborne epoch to the first airborne epoch with a confirmed
   track (0 when one existed already; NaN when none ever did);
 * ``restarts``: confirmed tracks of the run after the first one (the published track was
-  replaced by a new one: an estimator reset).
+  replaced by a new one: an estimator reset);
+* what the gross errors are (per flight): ``gross_vertical_pct``, the share of gross epochs
+  whose vertical error exceeds the horizontal one, and ``gross_age_p50_s``, the median age of
+  the last accepted measurement at them (a long coast on the CV prediction).
 """
 
 from __future__ import annotations
@@ -93,6 +96,8 @@ class GridSamples:
     fresh: int  # ... published and last accepted measurement <= fresh_age_s old
     errors: FloatArray  # 3D error of each covered epoch
     nees: FloatArray  # NEES of each covered epoch
+    vertical: FloatArray  # |vertical error| of each covered epoch
+    ages: FloatArray  # age of the last accepted measurement at each covered epoch
     observable: int  # radar-observable epochs (-1: no labels)
     observable_covered: int
     observable_gross: int
@@ -121,6 +126,10 @@ class GridScore:
     ttf_s: float  # pooled: mean over the flights that had a confirmed track
     no_track_flights: int  # flights without any confirmed track while airborne
     restarts: int  # pooled: total
+    # what the gross errors are: the share of them whose vertical error exceeds the
+    # horizontal one, and the median age of the last accepted measurement at them
+    gross_vertical_pct: float
+    gross_age_p50_s: float
 
     def as_dict(self) -> dict[str, float | int]:
         return asdict(self)
@@ -188,6 +197,7 @@ def score_grid(
     fresh = cov & (grid.age_s <= s.fresh_age_s)
     err = ee.error_m[cov]
     ne = ee.nees[cov]
+    vertical = np.abs(grid.x[cov, 2] - ee.truth_enu[cov, 2])
     gross = err > s.gross_error_m
 
     if uav_report_t is None:
@@ -217,6 +227,8 @@ def score_grid(
         fresh=int(np.count_nonzero(fresh)),
         errors=np.asarray(err, dtype=float),
         nees=ne,
+        vertical=np.asarray(vertical, dtype=float),
+        ages=np.asarray(grid.age_s[cov], dtype=float),
         observable=n_obs,
         observable_covered=n_obs_cov,
         observable_gross=n_obs_gross,
@@ -237,6 +249,11 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
     n_obs = sum(x.observable for x in labelled)
     n_obs_cov = sum(x.observable_covered for x in labelled)
     n_obs_gross = sum(x.observable_gross for x in labelled)
+    vert = np.concatenate([x.vertical for x in samples]) if samples else np.zeros(0)
+    ages = np.concatenate([x.ages for x in samples]) if samples else np.zeros(0)
+    gross = err > s.gross_error_m
+    n_gross = int(np.count_nonzero(gross))
+    horiz2 = err[gross] ** 2 - vert[gross] ** 2  # horizontal error squared
     lo, hi = s.nees_bounds(3)
     ttfs = [x.ttf_s for x in samples if math.isfinite(x.ttf_s)]
     nan = math.nan
@@ -249,7 +266,7 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
         err_p50_m=float(np.percentile(err, 50)) if err.size else nan,
         err_p95_m=float(np.percentile(err, 95)) if err.size else nan,
         err_max_m=float(err.max()) if err.size else nan,
-        gross_pct=_pct(int(np.count_nonzero(err > s.gross_error_m)), int(err.size)),
+        gross_pct=_pct(n_gross, int(err.size)),
         observable_epochs=n_obs if labelled else -1,
         observable_coverage_pct=_pct(n_obs_cov, n_obs) if labelled else nan,
         observable_gross_pct=_pct(n_obs_gross, n_obs_cov) if labelled else nan,
@@ -258,6 +275,8 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
         ttf_s=float(np.mean(ttfs)) if ttfs else nan,
         no_track_flights=sum(1 for x in samples if x.epochs > 0 and not math.isfinite(x.ttf_s)),
         restarts=sum(x.restarts for x in samples),
+        gross_vertical_pct=_pct(int(np.count_nonzero(vert[gross] ** 2 > horiz2)), n_gross),
+        gross_age_p50_s=float(np.median(ages[gross])) if n_gross else nan,
     )
 
 

@@ -112,6 +112,17 @@ def text_table(scores: Mapping[str, GridScore]) -> str:
     return "\n".join(out)
 
 
+def markdown_flights(results: Sequence[FlightResult], settings: ScoreSettings) -> str:
+    """One row per (profile, flight), in the results' order."""
+    heads = ["profile", "flight"] + [h for _, h, _ in FLIGHT_COLUMNS]
+    out = ["| " + " | ".join(heads) + " |", "|---|---|" + "---:|" * len(FLIGHT_COLUMNS)]
+    for r, s in per_flight_scores(results, settings):
+        cells = [r.profile, r.flight_id]
+        cells += [format_value(getattr(s, f), fmt) for f, _, fmt in FLIGHT_COLUMNS]
+        out.append("| " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
 def markdown_table(scores: Mapping[str, GridScore]) -> str:
     heads = ["profile"] + [h for _, h, _ in TABLE_COLUMNS]
     out = ["| " + " | ".join(heads) + " |", "|---|" + "---:|" * len(TABLE_COLUMNS)]
@@ -125,7 +136,24 @@ CSV_FIELDS = (
     "profile", "flight", "plan", "seed", "split", "epochs", "coverage_pct",
     "fresh_coverage_pct", "err_mean_m", "err_p50_m", "err_p95_m", "err_max_m", "gross_pct",
     "observable_epochs", "observable_coverage_pct", "observable_gross_pct", "anees",
-    "nees_in95_pct", "ttf_s", "restarts", "steps", "seconds",
+    "nees_in95_pct", "ttf_s", "restarts", "gross_vertical_pct", "gross_age_p50_s", "steps",
+    "seconds",
+)
+
+# the per-flight Markdown table: (GridScore field, header, format)
+FLIGHT_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("coverage_pct", "cov %", ".1f"),
+    ("fresh_coverage_pct", "fresh %", ".1f"),
+    ("err_mean_m", "mean m", ".1f"),
+    ("err_p95_m", "p95 m", ".1f"),
+    ("err_max_m", "max m", ".0f"),
+    ("gross_pct", "gross %", ".1f"),
+    ("observable_coverage_pct", "obs cov %", ".1f"),
+    ("observable_gross_pct", "obs gross %", ".1f"),
+    ("anees", "ANEES", ".1f"),
+    ("gross_vertical_pct", "gross: vertical %", ".0f"),
+    ("gross_age_p50_s", "gross: age p50 s", ".1f"),
+    ("restarts", "restarts", "d"),
 )
 
 
