@@ -95,7 +95,10 @@ def test_gap_coast_beyond_the_maximum_restart_and_gross_error_by_hand() -> None:
     prof = hand_profile(3.0)
     x1 = np.array([5.0, 0.0, UP, 10.0, 1.0, 0.0])  # on truth at T0+0.5, north velocity wrong
     x2 = np.array([100.0, 0.0, UP + 200.0, 10.0, 0.0, 0.0])  # gross
-    steps = [step(T0 + 0.5, "initialised", x1, P0), step(T0 + 10.0, "reset", x2, P0)]
+    steps = [
+        step(T0 + 0.5, "initialised", x1, P0),
+        step(T0 + 10.0, "reset", x2, P0, source="rf"),
+    ]
     g = grid_from_steps(steps, prof, 1.0, T0, T0 + 10.0)
     assert len(g) == 11
     np.testing.assert_array_equal(g.t, T0 + np.arange(11.0))
@@ -105,6 +108,7 @@ def test_gap_coast_beyond_the_maximum_restart_and_gross_error_by_hand() -> None:
     assert g.age_s[10] == 0.0
     assert g.track_id.tolist() == [-1] + [0] * 9 + [1]
     assert g.restarts == 1
+    assert g.last_source.tolist() == [""] + ["radar"] * 9 + ["rf"]
     # coasted epochs are the prediction: north error = 1 m/s * dt, P_pos = 4 + dt^2 (q = 0)
     np.testing.assert_allclose(g.x[2, :3], [20.0, 1.5, UP])
     np.testing.assert_allclose(np.diag(g.P[2])[:3], 4.0 + 1.5**2)
@@ -125,6 +129,7 @@ def test_gap_coast_beyond_the_maximum_restart_and_gross_error_by_hand() -> None:
     assert sc.ttf_s == pytest.approx(1.0)
     assert sc.restarts == 1
     assert sc.gross_vertical_pct == 100.0 and sc.gross_age_p50_s == 0.0
+    assert sc.gross_rf_pct == 100.0
     # NEES by hand: e = (0, dt, 0), P_pos = (4 + dt^2) I; the restart: 200^2 / 4
     hand = [dt**2 / (4 + dt**2) for dt in (0.5, 1.5, 2.5)] + [200.0**2 / 4]
     assert sc.anees == pytest.approx(np.mean(hand))
@@ -261,3 +266,4 @@ def test_run_command_writes_the_grid(tmp_path: Path, capsys: pytest.CaptureFixtu
     i = int(np.flatnonzero(g.published)[100])
     assert float(rows[i]["x"]) == pytest.approx(g.x[i, 0], abs=1e-6)
     assert float(rows[i]["age_s"]) == pytest.approx(g.age_s[i], abs=1e-6)
+    assert [r["last_source"] for r in rows] == g.last_source.tolist()

@@ -84,7 +84,8 @@ class TrackSnapshot:
 
     ``confirmed`` False (a tentative track, or no track at all: ``x`` NaN) publishes nothing.
     ``last_accepted_t`` is the time of the track's last accepted measurement (its start
-    included); ``track_id`` numbers the tracks of a run (0, 1, ...), -1 without a track.
+    included) and ``last_source`` that measurement's source; ``track_id`` numbers the tracks
+    of a run (0, 1, ...), -1 without a track.
     """
 
     t: float
@@ -93,6 +94,7 @@ class TrackSnapshot:
     last_accepted_t: float
     confirmed: bool
     track_id: int
+    last_source: str = ""
 
     @staticmethod
     def none(t: float) -> TrackSnapshot:
@@ -106,8 +108,8 @@ class GridState:
 
     ``has_track``: a confirmed track exists (``x``, ``P`` are its state predicted to ``t``;
     NaN otherwise). ``published``: ``has_track`` and the last accepted measurement is at most
-    ``max_coast_s`` old. ``age_s``: ``t`` minus that measurement's time (NaN without a
-    confirmed track).
+    ``max_coast_s`` old. ``age_s``: ``t`` minus that measurement's time, ``last_source`` its
+    source (NaN and "" without a confirmed track).
     """
 
     k: int
@@ -118,6 +120,7 @@ class GridState:
     published: bool
     age_s: float
     track_id: int
+    last_source: str = ""
 
 
 class GridEmitter:
@@ -214,11 +217,12 @@ class GridEmitter:
         b = self.epoch_time(k)
         s = self._snap
         if s is None or not s.confirmed:
-            return GridState(k, b, _NAN6, _NAN66, False, False, math.nan, -1)
+            return GridState(k, b, _NAN6, _NAN66, False, False, math.nan, -1, "")
         dt = b - s.t
         x, P = (s.x, s.P) if dt == 0.0 else self.predict(s.x, s.P, dt)
         age = b - s.last_accepted_t
-        return GridState(k, b, x, P, True, age <= self.max_coast_s, age, s.track_id)
+        published = age <= self.max_coast_s
+        return GridState(k, b, x, P, True, published, age, s.track_id, s.last_source)
 
 
 class StepGrid:
@@ -253,6 +257,7 @@ class StepGrid:
         self._track_id = -1
         self._confirmed = False
         self._last_accepted = math.nan
+        self._last_source = ""
         self._last_t = -math.inf
 
     @property
@@ -288,9 +293,10 @@ class StepGrid:
             self._confirmed = False
         if status in USED:
             self._last_accepted = t
+            self._last_source = str(step.source)
         self._last_t = t
         snap = TrackSnapshot(
-            t, x, step.P, self._last_accepted, self._confirmed, self._track_id
+            t, x, step.P, self._last_accepted, self._confirmed, self._track_id, self._last_source
         )
         return self.emitter.feed(snap)
 
@@ -314,6 +320,7 @@ class Grid:
     published: npt.NDArray[np.bool_]
     age_s: FloatArray
     track_id: npt.NDArray[np.int64]
+    last_source: npt.NDArray[np.str_]  # source of the last accepted measurement ("" none)
     confirmed_tracks: int  # confirmed tracks over the whole run (not only inside the grid)
 
     @property
@@ -339,6 +346,7 @@ class Grid:
                         int(self.has_track[i]),
                         int(self.track_id[i]),
                         "" if not math.isfinite(self.age_s[i]) else f"{self.age_s[i]:.6f}",
+                        str(self.last_source[i]),
                     ]
                     + ["" if not math.isfinite(v) else f"{v:.6f}" for v in self.x[i]]
                     + ["" if not math.isfinite(v) else f"{v:.6g}" for v in d]
@@ -346,7 +354,7 @@ class Grid:
 
 
 GRID_CSV_HEADER = (
-    *("t", "published", "has_track", "track", "age_s"),
+    *("t", "published", "has_track", "track", "age_s", "last_source"),
     *("x", "y", "z", "vx", "vy", "vz"),
     *("var_x", "var_y", "var_z", "var_vx", "var_vy", "var_vz"),
 )
@@ -369,6 +377,7 @@ def stack_states(
         published=np.array([s.published for s in states], dtype=bool),
         age_s=np.array([s.age_s for s in states], dtype=float),
         track_id=np.array([s.track_id for s in states], dtype=np.int64),
+        last_source=np.array([s.last_source for s in states], dtype=str).reshape(n),
         confirmed_tracks=confirmed_tracks,
     )
 

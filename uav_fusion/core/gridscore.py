@@ -25,8 +25,9 @@ Per flight, and pooled over flights (:func:`pool`):
 * ``restarts``: confirmed tracks of the run after the first one (the published track was
   replaced by a new one: an estimator reset);
 * what the gross errors are (per flight): ``gross_vertical_pct``, the share of gross epochs
-  whose vertical error exceeds the horizontal one, and ``gross_age_p50_s``, the median age of
-  the last accepted measurement at them (a long coast on the CV prediction).
+  whose vertical error exceeds the horizontal one, ``gross_age_p50_s``, the median age of
+  the last accepted measurement at them (a long coast on the CV prediction), and
+  ``gross_rf_pct``, the share of them whose last accepted measurement was an RF fix.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from scipy.stats import chi2
 
 from uav_fusion.core.grid import Grid
 from uav_fusion.core.metrics import interpolate_truth
-from uav_fusion.core.records import Flight
+from uav_fusion.core.records import RF, Flight
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
@@ -98,6 +99,7 @@ class GridSamples:
     nees: FloatArray  # NEES of each covered epoch
     vertical: FloatArray  # |vertical error| of each covered epoch
     ages: FloatArray  # age of the last accepted measurement at each covered epoch
+    rf_last: npt.NDArray[np.bool_]  # ... that measurement was an RF fix
     observable: int  # radar-observable epochs (-1: no labels)
     observable_covered: int
     observable_gross: int
@@ -130,6 +132,7 @@ class GridScore:
     # horizontal one, and the median age of the last accepted measurement at them
     gross_vertical_pct: float
     gross_age_p50_s: float
+    gross_rf_pct: float  # share of gross epochs whose last accepted measurement was RF
 
     def as_dict(self) -> dict[str, float | int]:
         return asdict(self)
@@ -229,6 +232,7 @@ def score_grid(
         nees=ne,
         vertical=np.asarray(vertical, dtype=float),
         ages=np.asarray(grid.age_s[cov], dtype=float),
+        rf_last=np.asarray(grid.last_source[cov] == RF, dtype=bool),
         observable=n_obs,
         observable_covered=n_obs_cov,
         observable_gross=n_obs_gross,
@@ -251,6 +255,7 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
     n_obs_gross = sum(x.observable_gross for x in labelled)
     vert = np.concatenate([x.vertical for x in samples]) if samples else np.zeros(0)
     ages = np.concatenate([x.ages for x in samples]) if samples else np.zeros(0)
+    rf_last = np.concatenate([x.rf_last for x in samples]) if samples else np.zeros(0, bool)
     gross = err > s.gross_error_m
     n_gross = int(np.count_nonzero(gross))
     horiz2 = err[gross] ** 2 - vert[gross] ** 2  # horizontal error squared
@@ -277,6 +282,7 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
         restarts=sum(x.restarts for x in samples),
         gross_vertical_pct=_pct(int(np.count_nonzero(vert[gross] ** 2 > horiz2)), n_gross),
         gross_age_p50_s=float(np.median(ages[gross])) if n_gross else nan,
+        gross_rf_pct=_pct(int(np.count_nonzero(rf_last[gross])), n_gross),
     )
 
 

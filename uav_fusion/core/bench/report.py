@@ -136,8 +136,8 @@ CSV_FIELDS = (
     "profile", "flight", "plan", "seed", "split", "epochs", "coverage_pct",
     "fresh_coverage_pct", "err_mean_m", "err_p50_m", "err_p95_m", "err_max_m", "gross_pct",
     "observable_epochs", "observable_coverage_pct", "observable_gross_pct", "anees",
-    "nees_in95_pct", "ttf_s", "restarts", "gross_vertical_pct", "gross_age_p50_s", "steps",
-    "seconds",
+    "nees_in95_pct", "ttf_s", "restarts", "gross_vertical_pct", "gross_age_p50_s",
+    "gross_rf_pct", "steps", "seconds",
 )
 
 # the per-flight Markdown table: (GridScore field, header, format)
@@ -153,6 +153,7 @@ FLIGHT_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("anees", "ANEES", ".1f"),
     ("gross_vertical_pct", "gross: vertical %", ".0f"),
     ("gross_age_p50_s", "gross: age p50 s", ".1f"),
+    ("gross_rf_pct", "gross: last RF %", ".0f"),
     ("restarts", "restarts", "d"),
 )
 
