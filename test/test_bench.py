@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import importlib.util
 import json
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ import yaml
 from uav_fusion.cli import main
 from uav_fusion.core.bench.cache import LABELS_FILE, cached_flights, generate_flight, read_labels
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.bench.run import ScoreTask, score_task
+from uav_fusion.core.bench.run import GenerateTask, ScoreTask, generate_task, score_task
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimator import load_profile
 from uav_fusion.core.site import load_site
@@ -178,3 +179,37 @@ def test_bench_command_rejects_duplicate_profile_names(tmp_path: Path) -> None:
     argv = ["bench", "--definition", str(definition), "--profiles", "paper", "paper",
             "--out", str(tmp_path / "o"), "--cache", str(tmp_path / "c")]
     assert main(argv) == 2
+
+
+def test_tasks_and_results_pickle_for_worker_processes(tmp_path: Path) -> None:
+    """Worker processes receive tasks and return results by pickle (module-level types)."""
+    d = load_definition(write_def(tmp_path, tiny(duration_s=30.0)))
+    site = load_site()
+    cf = cached_flights(d, "tune", tmp_path / "cache", SITE_FILE)[0]
+    gen = GenerateTask(cf, d, site)
+    assert pickle.loads(pickle.dumps(gen)).flight == cf
+    assert generate_task(pickle.loads(pickle.dumps(gen))) is True
+    task = ScoreTask(cf, load_profile("paper"), site, d.grid_hz, d.settings)
+    res = score_task(pickle.loads(pickle.dumps(task)))
+    back = pickle.loads(pickle.dumps(res))
+    assert back.flight_id == res.flight_id == "zigzag_dash-s3"
+    np.testing.assert_array_equal(back.samples.errors, res.samples.errors)
+
+
+def test_bench_runs_on_an_existing_scheduler(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from distributed import LocalCluster
+
+    definition = write_def(tmp_path, tiny(duration_s=30.0, splits={"tune": [3], "test": [4]}))
+    with LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+        argv = [
+            "bench", "--definition", str(definition), "--out", str(tmp_path / "o"),
+            "--cache", str(tmp_path / "c"), "--scheduler", cluster.scheduler_address,
+            "--no-figure",
+        ]
+        assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert f"Dask scheduler {cluster.scheduler_address} (1 workers)" in text
+    with (tmp_path / "o" / "per_flight.csv").open() as fh:
+        assert [r["flight"] for r in csv.DictReader(fh)] == ["zigzag_dash-s4"]
