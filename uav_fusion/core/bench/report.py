@@ -238,8 +238,8 @@ def write_figure(
         ax.set_xticklabels(flights, rotation=45, ha="right", fontsize=7)
         ax.set_ylabel(lab, fontsize=8)
         ax.grid(True, axis="y", alpha=0.3)
-        if profiles:
-            ax.legend(fontsize=7)
+        if profiles:  # outside the axes: the bars reach the top
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     ax_cov.set_ylim(0, 100)
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=FIGURE_DPI)
