@@ -300,6 +300,12 @@ class StepGrid:
         )
         return self.emitter.feed(snap)
 
+    def advance(self, t: float) -> list[GridState]:
+        """Every step up to time ``t`` has been fed (e.g. a reorder buffer released everything
+        up to ``t``): emit the epochs ``<= t``. Live use: call after each release."""
+        self._last_t = max(self._last_t, float(t))
+        return self.emitter.advance(t)
+
     def feed_steps(self, steps: Iterable[Step]) -> list[GridState]:
         out: list[GridState] = []
         for s in steps:
