@@ -1,6 +1,7 @@
 # Two commands that work on a fresh machine, each doing its own set-up:
 #   make demo   - run the whole node graph on the bundled default flight and write out/demo/
 #   make test   - run the test suite
+#   make fuzz   - the property tests with 10 000 random examples each (minutes; not in CI)
 SHELL := /bin/bash
 PYTHON ?= python3
 VENV ?= .venv
@@ -12,7 +13,7 @@ DEV_STAMP := $(VENV)/.dev-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 DOMAIN = $${ROS_DOMAIN_ID:-$$(( RANDOM % 100 + 1 ))}
 
-.PHONY: demo test lint bench bench-accuracy clean
+.PHONY: demo test lint bench bench-accuracy fuzz clean
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +32,13 @@ demo: $(RUNTIME_STAMP)
 
 test: $(DEV_STAMP)
 	ROS_DOMAIN_ID=$(DOMAIN) $(PY) -m pytest -q $(PYTEST_ARGS)
+
+# The property tests of test/property with many more random examples (minutes; not in CI).
+# UAV_FUZZ_EXAMPLES sets the examples per test (default 10000), UAV_FUZZ_NODE_EXAMPLES those of
+# the in-process fusion node test (default 200).
+fuzz: $(DEV_STAMP)
+	ROS_DOMAIN_ID=$(DOMAIN) UAV_FUZZ=1 $(PY) -m pytest -v -p no:cacheprovider --timeout=0 \
+		--hypothesis-show-statistics test/property $(PYTEST_ARGS)
 
 lint: $(DEV_STAMP)
 	$(VENV)/bin/ruff check uav_fusion test scripts

@@ -164,6 +164,21 @@ def test_range_gate_discards_without_touching_the_track(site: Site) -> None:
     assert est2.process(far)[0].reason != "range_gate"
 
 
+def test_range_gate_uses_the_slant_range_not_the_horizontal_distance(site: Site) -> None:
+    # 600 m out and 600 m up: 849 m slant range (beyond the 800 m gate) though only 600 m
+    # away over the ground; 500 m out and 600 m up (781 m slant) is inside
+    est = FusionEstimator(_profile(), site)
+    e0, n0, u0 = site.radar.enu
+    est.process(radar(0.0, (e0 + 500, n0, u0 + 600), 0))
+    high = est.process(radar(0.25, (e0 + 600, n0, u0 + 600), 1))[0]
+    assert high.status == "discarded" and high.reason == "range_gate"
+    below = est.process(radar(0.5, (e0 + 600, n0, u0 - 600), 2))[0]
+    assert below.reason == "range_gate"
+    inside = est.process(radar(0.75, (e0 + 500, n0, u0 + 600), 3))[0]
+    assert inside.reason != "range_gate"
+    assert est.counters["rejected_range_gate"] == 2
+
+
 def test_nis_rejection_coasts_on_the_prediction(site: Site) -> None:
     est = FusionEstimator(_profile(), site)
     est.process(radar(0.0, (300.0, -200.0, 50.0), 0))

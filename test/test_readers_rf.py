@@ -253,3 +253,22 @@ def test_failed_attempts_are_never_positions(tmp_path: Path, site: Site) -> None
     p = write(tmp_path, lines(HEADER, FAILED))
     (f,), _ = read_rf_csv(p, site)
     assert not f.ok and np.isnan([f.e, f.n]).all()
+
+
+def test_carriage_return_inside_an_unquoted_field(tmp_path: Path, site: Site) -> None:
+    # a lone \r inside a field (a file written half with Windows line ends) is one bad row
+    p = write(tmp_path, lines(HEADER, GOOD, FAILED.replace("TDOA", "TD\rOA"), GOOD2))
+    out, rep = read_rf_csv(p, site)
+    assert [a.line for a in out] == [2, 4]
+    assert rep.rows == 3 and rep.used == 2 and rep.skipped == Counter({"bad_csv": 1})
+    err = strict_error(p, site)
+    assert str(err) == f"{p}:3: carriage return (\\r) inside an unquoted field at column 5"
+    assert (err.path, err.line) == (p, 3)
+
+
+def test_carriage_return_inside_the_header(tmp_path: Path, site: Site) -> None:
+    p = write(tmp_path, lines(HEADER.replace("Latitude", "Lat\ritude"), GOOD, GOOD2))
+    out, rep = read_rf_csv(p, site)
+    assert out == [] and rep.skipped == Counter({"bad_header": 2})
+    assert "header line is not CSV: carriage return" in rep.notes[0]
+    assert strict_error(p, site).line == 1

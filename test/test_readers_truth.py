@@ -211,3 +211,25 @@ def test_unreadable_velocity_and_sats(tmp_path: Path, site: Site) -> None:
     )
     err = strict_error(p, site)
     assert (err.line, err.what) == (1, "velocity 'None' is not a (vN,vE,vD) tuple")
+
+
+def test_carriage_return_inside_an_unquoted_field(tmp_path: Path, site: Site) -> None:
+    p = write(tmp_path, lines(R1, R2.replace("15.8", "15\r.8"), R4))
+    out, rep = read_truth(p, site)
+    assert [f.line for f in out] == [1, 3]
+    assert rep.rows == 3 and rep.used == 2 and rep.skipped == Counter({"bad_csv": 1})
+    err = strict_error(p, site)
+    assert err.line == 2 and "carriage return (\\r) inside an unquoted field" in err.what
+
+
+def test_altitude_alone_at_minus_999_is_no_fix(tmp_path: Path, site: Site) -> None:
+    # the logger writes -999 for "no fix"; a row with valid lat/lon but altitude -999 has no
+    # usable height: the same rule as the all -999 rows (no_fix in both modes), never a fix
+    # 999 m below the take-off point
+    alt_only = row(2, "-78.6981", "35.7301", "-999", "2025-10-07 15:42:20.200000")
+    p = write(tmp_path, lines(R1, alt_only, R4))
+    for strict in (False, True):
+        out, rep = read_truth(p, site, strict=strict)
+        assert [f.line for f in out] == [1, 3]
+        assert rep.skipped == Counter({"no_fix": 1})
+        assert all(f.h > site.takeoff_h for f in out)

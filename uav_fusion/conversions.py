@@ -28,7 +28,10 @@ Representations (see ``docs/graph.md`` for the whole table):
   in Odometry and is lost: :func:`odometry_to_state` returns it as zeros.
 
 Malformed input raises :class:`MessageError` whose ``reason`` is a short counter key
-(``nan``, ``bad_covariance``, ``wrong_frame``, ``zero_stamp``) so nodes can count drops.
+(``nan``, ``bad_covariance``, ``wrong_frame``, ``zero_stamp``, ``bad_stamp`` (negative
+seconds, nanoseconds beyond 10^9), ``out_of_range`` (a position beyond
+:data:`MAX_ABS_ENU_M`, a truth fix outside the globe or the plausible heights), ``no_fix`` (a
+truth NavSatFix with status NO_FIX)) so nodes can count drops.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
+from uav_fusion.core.dataset.radar import H_MAX, H_MIN
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.records import (
     RADAR,
@@ -61,6 +65,13 @@ FloatArray = npt.NDArray[np.float64]
 UNKNOWN_VARIANCE = 1.0e6
 #: Relative tolerance of the symmetry check on incoming covariance blocks.
 SYMMETRY_RTOL = 1.0e-9
+#: Largest plausible ENU coordinate (m) of an incoming position: 10 000 km, far beyond any
+#: sensor's reach; anything larger is a corrupted value, never a measurement.
+MAX_ABS_ENU_M = 1.0e7
+#: Largest plausible variance (m^2) in an incoming covariance (a 1000 km sigma).
+MAX_VARIANCE_M2 = 1.0e12
+#: Plausible heights (m, WGS84 ellipsoid) of a truth fix; the radar reader's bounds.
+TRUTH_H_MIN, TRUTH_H_MAX = H_MIN, H_MAX
 
 _NS = 1_000_000_000
 
@@ -121,7 +132,20 @@ def ns_to_time(ns: int) -> float:
 def _check_stamp(stamp: Time) -> float:
     if stamp.sec == 0 and stamp.nanosec == 0:
         raise MessageError("zero_stamp", "message has no stamp (0)")
+    if stamp.sec < 0 or stamp.nanosec >= _NS:
+        raise MessageError(
+            "bad_stamp", f"stamp sec={stamp.sec}, nanosec={stamp.nanosec} is not a UTC time"
+        )
     return time_from_stamp(stamp)
+
+
+def _check_position(z: FloatArray, what: str) -> None:
+    if not np.all(np.isfinite(z)):
+        raise MessageError("nan", f"{what} is not finite")
+    if float(np.max(np.abs(z))) > MAX_ABS_ENU_M:
+        raise MessageError(
+            "out_of_range", f"{what} {z.tolist()} lies beyond {MAX_ABS_ENU_M:g} m of the origin"
+        )
 
 
 def _check_frame(frame_id: str, expected: str | None) -> None:
@@ -132,6 +156,10 @@ def _check_frame(frame_id: str, expected: str | None) -> None:
 def _check_cov_block(c: FloatArray, what: str) -> None:
     if not np.all(np.isfinite(c)):
         raise MessageError("bad_covariance", f"{what} covariance has non-finite entries")
+    if float(np.max(np.abs(c))) > MAX_VARIANCE_M2:
+        raise MessageError(
+            "bad_covariance", f"{what} covariance has entries beyond {MAX_VARIANCE_M2:g} m^2"
+        )
     scale = float(np.max(np.abs(c))) or 1.0
     if not np.allclose(c, c.T, rtol=0.0, atol=SYMMETRY_RTOL * scale):
         raise MessageError("bad_covariance", f"{what} covariance is not symmetric")
@@ -201,11 +229,11 @@ def msg_to_radar_measurement(
     _check_frame(msg.header.frame_id, expected_frame)
     p = msg.pose.pose.position
     z = np.array([p.x, p.y, p.z], dtype=float)
-    if not np.all(np.isfinite(z)):
-        raise MessageError("nan", "radar position is not finite")
+    _check_position(z, "radar position")
     cov = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
     R = np.array(cov[:3, :3])
     _check_cov_block(R, "radar position")
+    R = 0.5 * (R + R.T)  # exactly symmetric (the check allows rounding-size differences)
     return Measurement(t=t, source=RADAR, z=z, R=R, seq=seq)
 
 
@@ -261,6 +289,7 @@ def msg_to_rf_measurement(
     z = np.array([msg.point.x, msg.point.y], dtype=float)
     if not np.all(np.isfinite(z)):
         raise MessageError("nan", "RF fix is partly non-finite")
+    _check_position(z, "RF fix")
     return Measurement(t=t, source=RF, z=z, R=None if R is None else np.array(R), seq=seq)
 
 
@@ -300,9 +329,16 @@ def truth_to_navsatfix(fix: TruthFix, frame_id: str) -> NavSatFix:
 def navsatfix_to_truth(msg: NavSatFix, site: Site) -> TruthFix:
     """NavSatFix -> :class:`TruthFix` with ENU from ``site`` (velocity unknown: NaN)."""
     t = _check_stamp(msg.header.stamp)
+    if msg.status.status == NavSatStatus.STATUS_NO_FIX:
+        raise MessageError("no_fix", "truth fix has status NO_FIX")
     lat, lon, h = float(msg.latitude), float(msg.longitude), float(msg.altitude)
     if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(h)):
         raise MessageError("nan", "truth position is not finite")
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and H_MIN <= h <= H_MAX):
+        raise MessageError(
+            "out_of_range",
+            f"truth lat {lat}, lon {lon}, height {h} outside ±90, ±180, [{H_MIN:g}, {H_MAX:g}] m",
+        )
     e, n, u = site.to_enu(lat, lon, h)
     nan = math.nan
     return TruthFix(
@@ -359,10 +395,17 @@ class OdomState:
 
 
 def odometry_to_state(msg: Odometry) -> OdomState:
-    """Odometry -> state (inverse of :func:`state_to_odometry` up to the lost cross terms)."""
-    t = time_from_stamp(msg.header.stamp)
+    """Odometry -> state (inverse of :func:`state_to_odometry` up to the lost cross terms).
+
+    Raises :class:`MessageError` on a zero or impossible stamp, a non-finite state or a
+    position beyond :data:`MAX_ABS_ENU_M`.
+    """
+    t = _check_stamp(msg.header.stamp)
     p, v = msg.pose.pose.position, msg.twist.twist.linear
     x = np.array([p.x, p.y, p.z, v.x, v.y, v.z], dtype=float)
+    if not np.all(np.isfinite(x)):
+        raise MessageError("nan", "odometry state is not finite")
+    _check_position(x[:3], "odometry position")
     P = np.zeros((6, 6))
     P[:3, :3] = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)[:3, :3]
     P[3:, 3:] = np.asarray(msg.twist.covariance, dtype=float).reshape(6, 6)[:3, :3]

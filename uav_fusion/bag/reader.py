@@ -120,6 +120,8 @@ def _load_metadata(path: Path) -> BagMetadata:
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(path, None, f"cannot read: {exc}") from None
+    except ValueError:  # PyYAML's int() of an integer beyond Python's 4300-digit limit
+        raise DataError(path, None, "not valid YAML (an integer with too many digits)") from None
     except yaml.YAMLError as exc:
         line = None
         mark = getattr(exc, "problem_mark", None)
@@ -414,7 +416,9 @@ class BagReader:
         for name, source in candidates:
             scan = _scan(source)
             ok = scan.error is None and (
-                expected is None or _same_counts(scan.counts, expected)
+                meta is None
+                or (_same_counts(scan.counts, meta.topic_counts)
+                    and scan.total == meta.message_count)
             )
             if scan.error is not None:
                 self.warnings.append(

@@ -115,6 +115,8 @@ def _num(d: dict[str, Any], key: str, where: str) -> float:
         x = float(v)
     except (TypeError, ValueError):
         raise ConfigError(f"{where}: '{key}' must be a number, got {v!r}") from None
+    except OverflowError:  # an integer beyond the float range
+        raise ConfigError(f"{where}: '{key}' must be finite, got a number beyond 1e308") from None
     if not np.isfinite(x):
         raise ConfigError(f"{where}: '{key}' must be finite, got {v!r}")
     return x
@@ -175,12 +177,15 @@ def site_from_dict(doc: dict[str, Any], source: Path | None = None) -> Site:
         range_gate_m=gate,
         enu=enu(rlat, rlon, rgh + mast),
     )
-    rf = tuple(str(x) for x in _need(doc, "rf_sensors", src))
+    raw_rf = _need(doc, "rf_sensors", src)
+    if not isinstance(raw_rf, list):
+        raise ConfigError(f"{src}: 'rf_sensors' must be a list of tower names, got {raw_rf!r}")
+    rf = tuple(str(x) for x in raw_rf)
     for n in rf:
         if n not in towers:
             raise ConfigError(f"{src}: rf_sensors names unknown tower '{n}'")
     if len(rf) < 3:
-        raise ConfigError(f"{src}: TDOA needs at least 3 RF sensors, got {len(rf)}")
+        raise ConfigError(f"{src}: rf_sensors: TDOA needs at least 3 RF sensors, got {len(rf)}")
     to = _need(doc, "takeoff", src)
     tlat, tlon = _latlon(to, f"{src}: takeoff")
     clocks = doc.get("clock_offsets_h", {}) or {}

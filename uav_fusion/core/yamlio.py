@@ -22,5 +22,6 @@ def read_yaml_file(path: Path, what: str) -> Any:
         raise ConfigError(f"{path}: {what} not found")
     try:
         return yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+    except (yaml.YAMLError, UnicodeDecodeError, ValueError) as exc:
+        # ValueError: PyYAML's int() of an integer longer than Python's 4300-digit limit
         raise ConfigError(f"{path}: not valid YAML: {exc}") from None

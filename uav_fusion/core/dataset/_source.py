@@ -7,6 +7,7 @@ numbers. The public reader API is re-exported by :mod:`uav_fusion.core.dataset`.
 
 from __future__ import annotations
 
+import csv
 import math
 import re
 from collections import Counter
@@ -63,6 +64,25 @@ def parse_clock_time(text: str) -> tuple[float, str] | None:
     if not T_MIN <= t <= T_MAX:
         return None
     return t, kind
+
+
+def csv_fields(text: str) -> tuple[list[str], None] | tuple[None, str]:
+    """The fields of one CSV line, or (None, what was wrong) if it is not a CSV row.
+
+    The ``csv`` module refuses a carriage return or line feed inside an unquoted field
+    (a file written half with Windows line ends, a transfer that mangled them) and a field
+    longer than its limit (131 072 characters); both make the row unreadable instead of
+    ending the read.
+    """
+    try:
+        return next(csv.reader([text])), None
+    except csv.Error as exc:
+        cr = text.find("\r")
+        if cr >= 0 and "new-line" in str(exc):
+            return None, (
+                f"carriage return (\\r) inside an unquoted field at column {cr + 1}"
+            )
+        return None, f"not a CSV row: {exc}"
 
 
 def to_float(text: str) -> float | None:

@@ -18,13 +18,19 @@ at h0 rather than at the flight height (up to 200 m above) moves e, n by at most
 
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 
 import numpy as np
 
-from uav_fusion.core.dataset._source import Source, TimeOrder, parse_clock_time, to_float, to_int
+from uav_fusion.core.dataset._source import (
+    Source,
+    TimeOrder,
+    csv_fields,
+    parse_clock_time,
+    to_float,
+    to_int,
+)
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.records import LoadReport, RfAttempt
 from uav_fusion.core.site import Site
@@ -43,8 +49,10 @@ def read_rf_csv(
     """Read one Keysight RF CSV into RF attempts (failed ones included) in UTC.
 
     Skip reasons (lenient mode): ``bad_header`` (every row, when the header lacks a
-    required column), ``bad_columns``, ``truncated``, ``bad_value``, ``bad_time``,
-    ``nonfinite``, ``out_of_range``, ``time_backwards``, ``duplicate_time``.
+    required column or is not CSV), ``bad_csv`` (a carriage return inside an unquoted
+    field, a field beyond the ``csv`` module's size limit), ``bad_columns``, ``truncated``,
+    ``bad_value``, ``bad_time``, ``nonfinite``, ``out_of_range``, ``time_backwards``,
+    ``duplicate_time``.
     """
     src = Source(path, strict)
     rep = src.report
@@ -53,14 +61,19 @@ def read_rf_csv(
         return [], src.finish()
 
     hline, htext = src.lines[0]
-    header = next(csv.reader([htext]))
-    col = {_key(h): i for i, h in enumerate(header) if h.strip()}
+    header, bad_header = csv_fields(htext)
+    col = {_key(h): i for i, h in enumerate(header or []) if h.strip()}
     missing = [c for c in REQUIRED if _key(c) not in col]
     rows = src.lines[1:]
     rep.rows = len(rows)
-    if missing:
-        found = ", ".join(repr(h.strip()) for h in header)
-        what = f"header lacks column(s) {', '.join(repr(m) for m in missing)}; found: {found}"
+    if header is None or missing:
+        if header is None:
+            what = f"header line is not CSV: {bad_header}"
+        else:
+            found = ", ".join(repr(h.strip()) for h in header)
+            what = (
+                f"header lacks column(s) {', '.join(repr(m) for m in missing)}; found: {found}"
+            )
         if strict:
             raise DataError(src.path, hline, what)
         rep.skipped["bad_header"] += len(rows)
@@ -75,7 +88,10 @@ def read_rf_csv(
 
     kept: list[tuple[float, int, float, float, float | None, int | None, int | None, int]] = []
     for line, text in rows:
-        f = next(csv.reader([text]))
+        f, not_csv = csv_fields(text)
+        if f is None:
+            src.bad(line, "bad_csv", str(not_csv))
+            continue
         if len(f) != n_cols and not (len(f) > n_cols and not any(x.strip() for x in f[n_cols:])):
             src.bad(line, "bad_columns", f"{len(f)} fields, the header has {n_cols}")
             continue

@@ -17,7 +17,6 @@ that zone and the offset is not applied.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections import Counter
 from pathlib import Path
@@ -27,6 +26,7 @@ import numpy as np
 from uav_fusion.core.dataset._source import (
     Source,
     TimeOrder,
+    csv_fields,
     parse_clock_time,
     to_float,
     to_int,
@@ -70,6 +70,7 @@ def read_truth(
     """Read one vehicle truth log into UTC, ENU truth fixes.
 
     Skip reasons (lenient mode): ``no_fix`` (also counted in strict mode, never raised),
+    ``bad_csv`` (a carriage return inside an unquoted field, an oversized field),
     ``bad_columns``, ``truncated``, ``bad_value``, ``nonfinite``, ``out_of_range``,
     ``bad_time``, ``time_backwards``, ``duplicate_time``. An unreadable velocity tuple gives
     NaN velocity and an unreadable satellite count −1 (noted; strict mode raises).
@@ -87,7 +88,10 @@ def read_truth(
     nan3 = (math.nan, math.nan, math.nan)
     kept: list[tuple[float, float, float, float, tuple[float, float, float], int, int, int]] = []
     for line, text in src.lines:
-        f = next(csv.reader([text]))
+        f, not_csv = csv_fields(text)
+        if f is None:
+            src.bad(line, "bad_csv", str(not_csv))
+            continue
         if len(f) != len(COLUMNS):
             src.bad(
                 line,

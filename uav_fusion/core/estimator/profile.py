@@ -153,6 +153,8 @@ def _float(d: dict[str, Any], key: str, where: str, default: Any) -> float:
         x = float(v)
     except (TypeError, ValueError):
         raise ConfigError(f"{where}: '{key}' must be a number, got {v!r}") from None
+    except OverflowError:  # an integer beyond the float range
+        raise ConfigError(f"{where}: '{key}' must be finite, got a number beyond 1e308") from None
     if not np.isfinite(x):
         raise ConfigError(f"{where}: '{key}' must be finite, got {v!r}")
     return x
@@ -166,7 +168,7 @@ def _opt_float(d: dict[str, Any], key: str, where: str, default: Any) -> float |
 def _matrix(v: Any, n: int, where: str) -> FloatArray:
     try:
         a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(f"{where}: must be a {n}x{n} matrix of numbers") from None
     if a.shape != (n, n):
         raise ConfigError(f"{where}: must be a {n}x{n} matrix, got shape {a.shape}")

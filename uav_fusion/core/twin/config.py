@@ -8,6 +8,7 @@ and the key. Missing keys keep the defaults written here (which equal the shippe
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -170,14 +171,20 @@ def _section(cls: type[T], raw: Any, where: str) -> T:
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: '{key}' must be a number, got {value!r}")
+        try:
+            x = float(value)
+        except OverflowError:  # an integer beyond the float range
+            raise ConfigError(
+                f"{where}: '{key}' must be finite, got a number beyond 1e308"
+            ) from None
+        if not math.isfinite(x):
+            raise ConfigError(f"{where}: '{key}' must be finite")
         if isinstance(default, int) and not isinstance(default, bool):
-            if float(value) != int(value):
+            if x != int(x):
                 raise ConfigError(f"{where}: '{key}' must be an integer, got {value!r}")
             kwargs[key] = int(value)
         else:
-            kwargs[key] = float(value)
-        if kwargs[key] != kwargs[key] or kwargs[key] in (float("inf"), float("-inf")):
-            raise ConfigError(f"{where}: '{key}' must be finite")
+            kwargs[key] = x
     return cls(**kwargs)
 
 

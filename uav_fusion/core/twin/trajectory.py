@@ -52,9 +52,22 @@ def _num(d: dict[str, Any], key: str, where: str, default: float | None = None) 
             raise ConfigError(f"{where}: missing key '{key}'")
         return default
     v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        raise ConfigError(f"{where}: '{key}' must be a finite number, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not _finite(v):
+        raise ConfigError(f"{where}: '{key}' must be a finite number, got {_short(v)}")
     return float(v)
+
+
+def _finite(v: float) -> bool:
+    """A finite number that fits a float (a YAML integer may hold 400 digits)."""
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
+def _short(v: Any) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else f"{text[:20]}… ({len(text)} characters)"
 
 
 def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> FlightPlan:
