@@ -100,18 +100,28 @@ def probe() -> str | None:
     return None
 
 
-def host_env(domain_id: int, log_dir: Path) -> dict[str, str]:
-    """Environment of every ROS process inside the hosts."""
+def host_env(domain_id: int, log_dir: Path, host: str = "",
+             discovery: str = "subnet") -> dict[str, str]:
+    """Environment of every ROS process inside ``host``.
+
+    ``discovery``: ``subnet`` = multicast discovery on the hosts' subnet; ``static`` =
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` plus ``ROS_STATIC_PEERS`` = the other two
+    hosts' addresses (unicast discovery, no multicast needed).
+    """
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_",
                                                                      "FASTRTPS_", "RMW_"))}
     env.update(
         ROS_DOMAIN_ID=str(domain_id),
-        ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET",
+        ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET" if discovery == "subnet" else "LOCALHOST",
         RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
         FASTDDS_BUILTIN_TRANSPORTS="UDPv4",
         ROS_LOG_DIR=str(log_dir),
         PYTHONUNBUFFERED="1",
     )
+    if discovery == "static":
+        env["ROS_STATIC_PEERS"] = ";".join(a for h, a in HOST_ADDR.items() if h != host)
+    elif discovery != "subnet":
+        raise ValueError(f"discovery must be 'subnet' or 'static', not '{discovery}'")
     return env
 
 
@@ -123,10 +133,13 @@ class Lab:
     last process.
     """
 
-    def __init__(self, workdir: Path, domain_id: int | None = None) -> None:
+    def __init__(self, workdir: Path, domain_id: int | None = None,
+                 discovery: str = "subnet") -> None:
         self.workdir = workdir
         self.domain_id = domain_id or random.SystemRandom().randint(1, 100)
-        self.env = host_env(self.domain_id, workdir / "roslog")
+        self.discovery = discovery
+        self.env = {h: host_env(self.domain_id, workdir / "roslog", h, discovery)
+                    for h in HOSTS}
         self.switch: subprocess.Popen[bytes] | None = None
         self.hosts: dict[str, subprocess.Popen[bytes]] = {}
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
@@ -192,7 +205,8 @@ class Lab:
     def link(self, host: str, up: bool) -> None:
         """Bring a host's ``eth0`` down or up (inside its namespace); up restores its routes."""
         self.sh(host, "ip", "link", "set", "eth0", "up" if up else "down")
-        if up:  # taking a link down drops its routes; the subnet route comes back by itself
+        if up and self.discovery == "subnet":
+            # taking a link down drops its routes; the subnet route comes back by itself
             self.sh(host, "ip", "route", "replace", "224.0.0.0/4", "dev", "eth0")
 
     def counters(self, host: str) -> tuple[int, int]:
@@ -212,7 +226,7 @@ class Lab:
         self._logs.append(log)
         p = subprocess.Popen(
             [*self._enter(self.hosts[host].pid), *cmd], stdout=log, stderr=subprocess.STDOUT,
-            stdin=stdin, env=self.env, preexec_fn=_die_with_parent,
+            stdin=stdin, env=self.env[host], preexec_fn=_die_with_parent,
         )
         self.procs[key] = p
         return p
@@ -252,8 +266,8 @@ class Lab:
 
 
 @contextmanager
-def lab(workdir: Path, domain_id: int | None = None) -> Iterator[Lab]:
-    the_lab = Lab(workdir, domain_id)
+def lab(workdir: Path, domain_id: int | None = None, discovery: str = "subnet") -> Iterator[Lab]:
+    the_lab = Lab(workdir, domain_id, discovery)
     try:
         yield the_lab.open()
     finally:
@@ -588,6 +602,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="take the RF host's link down for this many wall seconds (0 = no)")
     ap.add_argument("--outage-after", type=float, default=5.0,
                     help="wall seconds after the replays start (default 5)")
+    ap.add_argument("--discovery", choices=("subnet", "static"), default="subnet",
+                    help="subnet: multicast on the hosts' subnet; static: LOCALHOST range + "
+                    "ROS_STATIC_PEERS (default subnet)")
     ap.add_argument("--out", type=Path, default=None, help="work folder (default: a temp dir)")
     opts = ap.parse_args(argv)
     if opts.mode == "fusion-host":
@@ -603,9 +620,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     work = opts.out or Path(tempfile.mkdtemp(prefix="uav_fusion_multihost_"))
     outage = Outage(after_s=opts.outage_after, down_s=opts.rf_outage) if opts.rf_outage else None
     t0 = time.monotonic()
-    with lab(work) as the_lab:
+    with lab(work, discovery=opts.discovery) as the_lab:
         print(f"multihost: switch + 3 hosts up in {time.monotonic() - t0:.2f} s "
-              f"(domain {the_lab.domain_id}, logs in {work})", flush=True)
+              f"(domain {the_lab.domain_id}, {opts.discovery} discovery, logs in {work})",
+              flush=True)
         run = run_graph(the_lab, flight, opts.rate, opts.window, "run", outage=outage,
                         progress=lambda m: print(f"multihost: {m}", flush=True))
     print(f"multihost: graph run {run.wall_s:.1f} s wall, exit codes {run.codes}")
@@ -615,6 +633,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         acc = accounting(run, opts.window, source)
         print(f"  {source} stream: " + ", ".join(
             f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}" for k, v in acc.items()))
+    if outage is not None:
+        t_down, t_up = sensor_time(run, outage.down_at), sensor_time(run, outage.up_at)
+        t0_flight = run.result["timeline"]["t_start"]
+        steps = run.result["fusion_steps"]
+        print(f"  outage: {outage.up_at - outage.down_at:.1f} s wall = flight time "
+              f"{t_down - t0_flight:.0f}-{t_up - t0_flight:.0f} s; fused steps in it: "
+              f"{sum(1 for t, _s, _u in steps if t_down < t < t_up)}; RF updates after it: "
+              f"{sum(1 for t, src, up in steps if t > t_up and src == 'rf' and up)}")
     diff = compare_offline(flight, run.result["steps"])
     print(f"  fused track vs offline run_flight: {diff}")
     print(f"  evaluator step gaps: {run.result['evaluator']['gaps']}")
