@@ -334,7 +334,28 @@ def run_graph(
     limit_s: float = 600.0,
     progress: Callable[[str], None] | None = None,
 ) -> RunResult:
-    """Run radar_replay, rf_replay and the fusion host once over ``flight``."""
+    """Run radar_replay, rf_replay and the fusion host once over ``flight``.
+
+    A failure raises :class:`LabError` with the end of every process's log."""
+    keys = [f"{tag}_fusion", f"{tag}_radar", f"{tag}_rf"]
+    try:
+        return _run_graph(the_lab, flight, rate, reorder_window_s, tag, outage, limit_s,
+                          progress)
+    except LabError as exc:
+        tails = "\n".join(f"--- {k}.log (end):\n{the_lab.log(k)[-3000:]}" for k in keys)
+        raise LabError(f"{exc}\n{tails}") from None
+
+
+def _run_graph(
+    the_lab: Lab,
+    flight: Path,
+    rate: float,
+    reorder_window_s: float,
+    tag: str,
+    outage: Outage | None,
+    limit_s: float,
+    progress: Callable[[str], None] | None,
+) -> RunResult:
     say = progress or (lambda _m: None)
     out_json = the_lab.workdir / f"{tag}_result.json"
     t0 = time.monotonic()
