@@ -641,12 +641,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     work = opts.out or Path(tempfile.mkdtemp(prefix="uav_fusion_multihost_"))
     outage = Outage(after_s=opts.outage_after, down_s=opts.rf_outage) if opts.rf_outage else None
     t0 = time.monotonic()
-    with lab(work, discovery=opts.discovery) as the_lab:
-        print(f"multihost: switch + 3 hosts up in {time.monotonic() - t0:.2f} s "
-              f"(domain {the_lab.domain_id}, {opts.discovery} discovery, logs in {work})",
-              flush=True)
-        run = run_graph(the_lab, flight, opts.rate, opts.window, "run", outage=outage,
-                        progress=lambda m: print(f"multihost: {m}", flush=True))
+    try:
+        with lab(work, discovery=opts.discovery) as the_lab:
+            return _report(the_lab, flight, opts, outage, work, t0)
+    except LabError as exc:
+        print(f"multihost: failed: {exc}", file=sys.stderr)
+        return 1
+
+
+def _report(the_lab: Lab, flight: Path, opts: argparse.Namespace, outage: Outage | None,
+            work: Path, t0: float) -> int:
+    """Run the graph once in ``the_lab`` and print the figures."""
+    print(f"multihost: switch + 3 hosts up in {time.monotonic() - t0:.2f} s "
+          f"(domain {the_lab.domain_id}, {opts.discovery} discovery, logs in {work})",
+          flush=True)
+    run = run_graph(the_lab, flight, opts.rate, opts.window, "run", outage=outage,
+                    progress=lambda m: print(f"multihost: {m}", flush=True))
     print(f"multihost: graph run {run.wall_s:.1f} s wall, exit codes {run.codes}")
     for h, (rx, tx) in run.bytes_rx_tx.items():
         print(f"  {h:6s} host eth0: received {rx} B, sent {tx} B")
