@@ -130,6 +130,34 @@ def test_follower_replay_follows_the_simulated_clock(ctx: Context, flight_dir: P
         n.destroy_node()
 
 
+def test_min_subscribers_holds_the_first_message_until_every_reader_is_there(
+    ctx: Context, flight_dir: Path
+) -> None:
+    """With min_subscribers 2 a replay waits for the second reader of its stream, so both
+    readers receive every message (volatile QoS gives a late reader nothing old)."""
+    flight = load_flight(flight_dir)
+    rf = RfReplay(context=ctx, parameter_overrides=_params(
+        flight_dir=str(flight_dir), rate=0.0, min_subscribers=2, wait_for_subscribers_s=60.0))
+    first = Collector(ctx, {"rf/fix": PointStamped})
+    ex = SingleThreadedExecutor(context=ctx)
+    for n in (rf, first):
+        ex.add_node(n)
+    drv = rf.start_standalone()
+    spin_until(ex, lambda: rf.pub.get_subscription_count() == 1)
+    end = time.monotonic() + 1.0  # 50 ticks of the replay's timer with one reader only
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.05)
+    assert drv.remaining == len(flight.rf) and first.got["rf/fix"] == []
+    second = Node("second", context=ctx)
+    got2: list[PointStamped] = []
+    second.create_subscription(PointStamped, "rf/fix", got2.append, stream_qos(1000))
+    ex.add_node(second)
+    spin_until(ex, lambda: len(got2) == len(first.got["rf/fix"]) == len(flight.rf))
+    assert [m.header.stamp for m in got2] == [m.header.stamp for m in first.got["rf/fix"]]
+    for n in (rf, first, second):
+        n.destroy_node()
+
+
 def test_delay_parameter_publishes_late_but_keeps_stamps(ctx: Context, flight_dir: Path) -> None:
     flight = load_flight(flight_dir)
     rf = RfReplay(

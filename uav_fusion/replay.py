@@ -101,6 +101,14 @@ def replay_params(publish_clock: bool) -> list[Param]:
             hi=1000,
         ),
         Param(
+            "min_subscribers",
+            1,
+            "before the first message, also wait (same timeout) until every stream has this "
+            "many subscribers, e.g. 2 when fusion_node and evaluator_node both read it",
+            lo=1,
+            hi=1000,
+        ),
+        Param(
             "delay_s",
             0.0,
             "publish each message this many sensor seconds after its stamp (tests lateness)",
@@ -170,6 +178,7 @@ class ReplayDriver:
         batch_span_s: float = math.inf,
         follow_sim_time: bool = False,
         clock_subscribers: int = 0,
+        min_subscribers: int = 1,
         drained: Callable[[], bool] | None = None,
         on_done: Callable[[], None] | None = None,
     ) -> None:
@@ -182,6 +191,7 @@ class ReplayDriver:
         self.t_start, self.t_end = span
         self.drained = drained
         self.clock_subscribers = int(clock_subscribers)
+        self.min_subscribers = int(min_subscribers)
         self.on_done = on_done
         self.events: list[ReplayEvent] = []
         self._publishers: list[Publisher] = []
@@ -241,7 +251,8 @@ class ReplayDriver:
             and self.clock_pub.get_subscription_count() < self.clock_subscribers
         ):
             return False
-        return all(p.get_subscription_count() > 0 for p in self._publishers)
+        n = max(1, self.min_subscribers)
+        return all(p.get_subscription_count() >= n for p in self._publishers)
 
     def _publish_clock(self, t: float) -> None:
         if self.clock_pub is None or t <= self._clock_t:
@@ -273,11 +284,13 @@ class ReplayDriver:
             if not ready and time.monotonic() - self._wait_started < self.wait_s:
                 return
             if not ready:
+                n = max(1, self.min_subscribers)
                 missing = [
-                    p.topic_name for p in self._publishers if p.get_subscription_count() == 0
+                    p.topic_name for p in self._publishers if p.get_subscription_count() < n
                 ]
+                what = "no subscriber" if n == 1 else f"fewer than {n} subscribers"
                 self.node.get_logger().warning(
-                    f"no subscriber after {self.wait_s:g} s on {', '.join(missing)}; "
+                    f"{what} after {self.wait_s:g} s on {', '.join(missing)}; "
                     "publishing anyway"
                 )
             self._state = "running"
@@ -330,7 +343,13 @@ class ReplayDriver:
             self._state = "finished"
             self.done = True
             self._publish_clock(self.t_end)
-            self.node.get_logger().info(f"replay finished: {len(self.events)} messages")
+            per_topic = ", ".join(
+                f"{p.topic_name} {self.published[id(p)]}" for p in self._publishers
+            )
+            # the sent counts a receiver's accounting is checked against (scripts/multihost.py)
+            self.node.get_logger().info(
+                f"replay finished: {len(self.events)} messages sent ({per_topic})"
+            )
             if self.on_done is not None:
                 self.on_done()
 
@@ -387,6 +406,7 @@ class ReplayNode(Node):
             batch_span_s=float(self.p["batch_span_s"]),
             follow_sim_time=self.use_sim_time(),
             clock_subscribers=int(self.p["wait_for_clock_subscribers"]),
+            min_subscribers=int(self.p["min_subscribers"]),
             on_done=self._on_done,
         )
         for pub, items in self.streams():
