@@ -9,19 +9,22 @@ from __future__ import annotations
 
 import csv
 import itertools
+import json
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from uav_fusion.cli import main as cli_main
 from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.records import Flight, RadarTrack
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin.config import load_twin_config, twin_config_from_dict
 from uav_fusion.core.twin.generate import TwinFlight, generate_twin
 from uav_fusion.core.twin.radar_model import BIRD, CLUTTER, GHOST, UAV, VEHICLE
-from uav_fusion.core.twin.trajectory import load_flight_plan
+from uav_fusion.core.twin.trajectory import flight_plan_from_dict, load_flight_plan
 from uav_fusion.core.twin.writers import write_twin
 from uav_fusion.resources import config_path
 
@@ -198,3 +201,18 @@ def test_busy_scene_is_deterministic(busy, site, tmp_path: Path) -> None:  # typ
     a = {p.name: p.read_bytes() for p in sorted(Path(first).iterdir())}
     b = {p.name: p.read_bytes() for p in sorted(tmp_path.iterdir())}
     assert a == b
+
+
+def test_scene_scale_from_the_command_line_and_the_plan(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    counts = {}
+    for k in ("0", "2"):
+        out = tmp_path / k
+        args = ["generate", "--out", str(out), "--waypoints", str(LOW_PASS), "--seed", "101"]
+        assert cli_main([*args, "--duration", "120", "--scene-scale", k]) == 0
+        man = json.loads((out / "twin_manifest.json").read_text())
+        assert man["scene_scale"] == float(k)
+        counts[k] = sum(len(f.tracks) for f in load_flight(out, site, strict=True).radar)
+    assert counts["0"] < counts["2"]  # the scene adds tracks
+    doc = {"name": "x", "scene_scale": -1, "waypoints": [{"e": 0, "n": 0, "alt": 20}]}
+    with pytest.raises(ConfigError, match="scene_scale"):
+        flight_plan_from_dict(doc, site)

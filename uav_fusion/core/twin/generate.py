@@ -86,6 +86,7 @@ class TwinFlight:
     radar: tuple[RadarFrameOut, ...]
     rf: tuple[RfAttemptOut, ...]
     radar_sim: tuple[SimRadarFrame, ...]
+    scene_scale: float = 1.0  # the radar scene's rate multiplier used
 
     @property
     def start_datetime(self) -> datetime:
@@ -307,6 +308,7 @@ def generate_twin(
         radar=_radar_out(frames, used_site, start_unix),
         rf=_rf_out(attempts, used_site, config, start_unix),
         radar_sim=tuple(frames),
+        scene_scale=scale,
     )
 
 
