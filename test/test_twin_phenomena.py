@@ -216,3 +216,16 @@ def test_scene_scale_from_the_command_line_and_the_plan(site, tmp_path: Path) ->
     doc = {"name": "x", "scene_scale": -1, "waypoints": [{"e": 0, "n": 0, "alt": 20}]}
     with pytest.raises(ConfigError, match="scene_scale"):
         flight_plan_from_dict(doc, site)
+
+
+def test_bad_scene_configuration_names_the_key() -> None:
+    with pytest.raises(ConfigError, match=r"vehicles: roads\[0\]\[1\]"):
+        twin_config_from_dict({"vehicles": {"roads": [[[0, 0], [1, "x"]]]}})
+    with pytest.raises(ConfigError, match=r"vehicles: roads\[0\]: expected a list of at least two"):
+        twin_config_from_dict({"vehicles": {"roads": [[[0, 0]]]}})
+    with pytest.raises(ConfigError, match="clutter: unknown key 'site'"):
+        twin_config_from_dict({"clutter": {"site": 3}})
+    with pytest.raises(ConfigError, match="rf_outage"):
+        twin_config_from_dict({"rf_outage": {"mean_run": 0.5}})
+    cfg = twin_config_from_dict({"vehicles": {"roads": [[[0, 0], [100, 50], [200, 0]]]}})
+    assert cfg.vehicles.roads == (((0.0, 0.0), (100.0, 50.0), (200.0, 0.0)),)
