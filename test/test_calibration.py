@@ -31,9 +31,11 @@ def test_default_flight_meets_the_calibration_targets(default_result) -> None:  
     assert 120.0 <= r.radar.max <= 350.0
     assert r.radar_beyond_gate.mean > 1.5 * r.radar_in_gate.mean
     assert r.radar_beyond_gate.count > 300 and r.radar_in_gate.count > 1000
-    assert r.radar_other_tracks > 0  # birds and clutter are present and told apart
+    assert r.radar_other_tracks > 0  # the UAV's multipath ghost is present and told apart
     rcs_min, rcs_mean, rcs_max = r.radar_rcs_m2
-    assert rcs_min >= 0.006 and rcs_max <= 0.56 and 0.09 <= rcs_mean <= 0.15
+    # the UAV's own looks lie in the paper's 0.0066-0.549 m2; a ghost look its track takes is
+    # weaker by the ground's reflection loss
+    assert 0.0 < rcs_min < 0.0066 and rcs_max <= 0.56 and 0.09 <= rcs_mean <= 0.15
     # RF: ~216 attempts at ~3.88 s, 90-98 % fixes, heavy-tailed errors
     assert 205 <= r.rf_attempts <= 227
     assert r.rf_interval_mean_s == pytest.approx(3.88, abs=0.1)

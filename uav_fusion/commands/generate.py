@@ -37,6 +37,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--sensors", help="comma-separated RF sensor towers (default: the site's, LW2,LW3,LW4,LW5)"
     )
     parser.add_argument("--config", help="twin parameter YAML (default: config/twin_default.yaml)")
+    parser.add_argument(
+        "--scene-scale",
+        type=float,
+        help="multiply the radar scene's clutter, car and bird rates (default: the plan's)",
+    )
     parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
 
 
@@ -56,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         radar_tower=args.radar_tower,
         sensors=sensors,
+        scene_scale=args.scene_scale,
     )
     paths = write_twin(twin, args.out)
     n_reports = sum(len(f.tracks) for f in twin.radar)

@@ -86,6 +86,7 @@ class TwinFlight:
     radar: tuple[RadarFrameOut, ...]
     rf: tuple[RfAttemptOut, ...]
     radar_sim: tuple[SimRadarFrame, ...]
+    scene_scale: float = 1.0  # the radar scene's rate multiplier used
 
     @property
     def start_datetime(self) -> datetime:
@@ -248,8 +249,13 @@ def generate_twin(
     duration_s: float | None = None,
     radar_tower: str | None = None,
     sensors: list[str] | None = None,
+    scene_scale: float | None = None,
 ) -> TwinFlight:
-    """Simulate one flight. Deterministic for a given (site, config, plan, seed, options)."""
+    """Simulate one flight. Deterministic for a given (site, config, plan, seed, options).
+
+    ``scene_scale`` multiplies the rates of the radar scene's clutter sites, vehicles and
+    bird flocks (default: the plan's ``scene_scale``, 1 unless the plan sets it).
+    """
     seed = config.seed if seed is None else seed
     if seed < 0:
         raise ConfigError(f"seed must be >= 0, got {seed}")
@@ -258,7 +264,7 @@ def generate_twin(
     used_site = site_with_sensors(site, plan, radar_tower, sensors)
     start_unix = parse_utc(config.recording.start_utc)
     root = np.random.SeedSequence(seed)
-    s_traj, s_truth, s_radar, s_rf = root.spawn(4)
+    s_traj, s_truth, s_radar, s_rf, s_outage = root.spawn(5)
     traj = fly(
         plan,
         used_site,
@@ -268,8 +274,29 @@ def generate_twin(
         duration_s,
     )
     truth = _truth_log(traj, used_site, config, np.random.default_rng(s_truth), start_unix)
-    frames = simulate_radar(traj, used_site.radar, config.radar, np.random.default_rng(s_radar))
-    attempts = simulate_rf(traj, used_site, config.rf, np.random.default_rng(s_rf))
+    scale = plan.scene_scale if scene_scale is None else scene_scale
+    if not 0.0 <= scale <= 10.0:
+        raise ConfigError(f"scene scale must lie in [0, 10], got {scale}")
+    frames = simulate_radar(
+        traj,
+        used_site.radar,
+        config.radar,
+        np.random.default_rng(s_radar),
+        clutter=config.clutter,
+        vehicles=config.vehicles,
+        birds=config.birds,
+        ghosts=config.ghosts,
+        classifier=config.classifier,
+        scene_scale=scale,
+    )
+    attempts = simulate_rf(
+        traj,
+        used_site,
+        config.rf,
+        np.random.default_rng(s_rf),
+        outage=config.rf_outage,
+        outage_rng=np.random.default_rng(s_outage),
+    )
     return TwinFlight(
         site=used_site,
         config=config,
@@ -281,6 +308,7 @@ def generate_twin(
         radar=_radar_out(frames, used_site, start_unix),
         rf=_rf_out(attempts, used_site, config, start_unix),
         radar_sim=tuple(frames),
+        scene_scale=scale,
     )
 
 

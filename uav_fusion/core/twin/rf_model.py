@@ -27,7 +27,7 @@ import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from uav_fusion.core.site import Site
-from uav_fusion.core.twin.config import RfModel
+from uav_fusion.core.twin.config import RfModel, RfOutage
 from uav_fusion.core.twin.trajectory import Trajectory
 
 FloatArray = npt.NDArray[np.float64]
@@ -134,8 +134,23 @@ def solve_tdoa_2d(
 
 
 def simulate_rf(
-    traj: Trajectory, site: Site, cfg: RfModel, rng: np.random.Generator
+    traj: Trajectory,
+    site: Site,
+    cfg: RfModel,
+    rng: np.random.Generator,
+    outage: RfOutage | None = None,
+    outage_rng: np.random.Generator | None = None,
 ) -> list[SimRfAttempt]:
+    """Every localisation attempt of the recording.
+
+    ``outage`` adds runs of failed attempts: a two-state Markov chain over attempts (good ->
+    bad with ``enter_prob``, bad -> good with ``1 / mean_run``); in the bad state no sensor
+    captures the emission (interference, or the UAV's emitter pauses). The chain draws from
+    ``outage_rng``, so the other draws do not depend on it.
+    """
+    outage = outage or RfOutage()
+    r_out = outage_rng if outage_rng is not None else np.random.default_rng(0)
+    bad = False
     towers = site.rf_sensor_towers()
     names = tuple(t.name for t in towers)
     S = np.array([t.enu for t in towers], dtype=float)
@@ -178,7 +193,13 @@ def simulate_rf(
         e = n = math.nan
         cep = rho = 0.0
         rms = math.nan
-        if n_valid < 3:
+        # two-state chain: leave a bad run with 1 / mean_run, enter one with enter_prob
+        stay_or_enter = 1.0 - 1.0 / outage.mean_run if bad else outage.enter_prob
+        bad = bool(r_out.random() < stay_or_enter)
+        if bad:
+            reason = "no signal captured"
+            n_valid, n_nlos, idx = 0, 0, idx[:0]
+        elif n_valid < 3:
             reason = "too few valid sensors"
         else:
             order = idx[np.argsort(-snr[idx])]

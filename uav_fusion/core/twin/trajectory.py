@@ -44,6 +44,7 @@ class FlightPlan:
     waypoints: tuple[Waypoint, ...]
     hold_before_s: float
     source: Path | None = None
+    scene_scale: float = 1.0  # multiplies the radar scene's clutter, vehicle and bird rates
 
 
 def _num(d: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
@@ -117,7 +118,10 @@ def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> F
             raise ConfigError(f"{where}: hold_s must lie in [0, 3600] s, got {hold_s}")
         wps.append(Waypoint(e, n, alt, sp, hold_s))
     name = str(doc.get("name", source.stem if source else "flight"))
-    return FlightPlan(name, tuple(wps), hold, source)
+    scene = _num(doc, "scene_scale", src, 1.0)
+    if not 0.0 <= scene <= 10.0:
+        raise ConfigError(f"{src}: scene_scale must lie in [0, 10], got {scene}")
+    return FlightPlan(name, tuple(wps), hold, source, scene)
 
 
 def load_flight_plan(path: str | Path, site: Site) -> FlightPlan:

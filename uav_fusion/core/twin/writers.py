@@ -210,6 +210,7 @@ def write_manifest(twin: TwinFlight, path: Path, names: dict[str, str]) -> None:
         "twin_config_file": twin.config.source.name if twin.config.source else None,
         "start_utc": twin.start_datetime.strftime("%Y-%m-%d %H:%M:%S"),
         "duration_s": round(twin.traj.duration, 3),
+        "scene_scale": twin.scene_scale,
         "radar": {
             "tower": r.tower,
             "lat": r.lat,
