@@ -584,7 +584,11 @@ def _tracker_fields(
         out["score"] = ScoreConfig(**vals)
     elif len(assoc) > 1:
         raise ConfigError(f"{where}: association score keys need association.mode track_score")
-    out["smoother_lag_s"] = _opt_float(smoother, "lag_s", f"{where}: smoother", None)
+    lag = smoother.get("lag_s")
+    if isinstance(lag, float) and lag == float("inf"):
+        out["smoother_lag_s"] = lag  # .inf: offline RTS over each track segment
+    else:
+        out["smoother_lag_s"] = _opt_float(smoother, "lag_s", f"{where}: smoother", None)
     return out
 
 
