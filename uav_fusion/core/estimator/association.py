@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass, fields
 
 from uav_fusion.core.estimator.components import RadarRModel
-from uav_fusion.core.estimator.kalman import CvKalman
+from uav_fusion.core.estimator.kalman import CvKalman, PackedR
 from uav_fusion.core.records import RadarTrack
 
 RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
@@ -146,15 +146,17 @@ class ObjectTable:
         self.radar_r = radar_r
         self.objects: dict[int, RadarObject] = {}
 
-    def update(self, trk: RadarTrack) -> RadarObject:
-        """Fold one report into its object (created on first sight)."""
+    def update(self, trk: RadarTrack, r: PackedR | None = None) -> RadarObject:
+        """Fold one report (with its R, computed here when not given) into its object
+        (created on first sight)."""
         cfg = self.cfg
         obj = self.objects.get(trk.track_id)
         t = trk.t
         if obj is None:
             obj = self.objects[trk.track_id] = RadarObject(trk.track_id, t)
         dt = t - obj.last_t
-        r = self.radar_r.r_at(trk.e, trk.n, trk.u)
+        if r is None:
+            r = self.radar_r.r_at(trk.e, trk.n, trk.u)
         kf = obj.kf
         if kf is None or dt < 0:
             kf = obj.kf = CvKalman((cfg.object_q, cfg.object_q, cfg.object_q))

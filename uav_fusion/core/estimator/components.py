@@ -93,28 +93,28 @@ class PolarRadarR:
         if r < 1e-6:
             v = sr2 + f2
             return (v, 0.0, 0.0, v, 0.0, v)
-        ur = (de / r, dn / r, du / r)
+        u0, u1, u2 = de / r, dn / r, du / r
         if rho > 1e-9:
-            uaz = (-dn / rho, de / rho, 0.0)
-            uel = (-de * du / (rho * r), -dn * du / (rho * r), rho / r)
+            a0, a1 = -dn / rho, de / rho  # azimuth direction (horizontal)
+            k = -du / (rho * r)
+            l0, l1, l2 = de * k, dn * k, rho / r  # elevation direction
         else:  # straight above: azimuth undefined, use east/north as the cross axes
-            uaz = (1.0, 0.0, 0.0)
-            uel = (0.0, 1.0, 0.0)
+            a0, a1 = 1.0, 0.0
+            l0, l1, l2 = 0.0, 1.0, 0.0
         saz = rho * self.sigma_az_rad
         sel = r * self.sigma_el_rad
         a2 = saz * saz
-        l2 = sel * sel
-
-        def el(i: int, j: int) -> float:
-            return sr2 * ur[i] * ur[j] + a2 * uaz[i] * uaz[j] + l2 * uel[i] * uel[j]
-
+        e2 = sel * sel
+        ra0, ra1, ra2 = sr2 * u0, sr2 * u1, sr2 * u2
+        aa0, aa1 = a2 * a0, a2 * a1
+        el0, el1, el2 = e2 * l0, e2 * l1, e2 * l2
         return (
-            el(0, 0) + f2,
-            el(0, 1),
-            el(0, 2),
-            el(1, 1) + f2,
-            el(1, 2),
-            el(2, 2) + f2,
+            ra0 * u0 + aa0 * a0 + el0 * l0 + f2,
+            ra0 * u1 + aa0 * a1 + el0 * l1,
+            ra0 * u2 + el0 * l2,
+            ra1 * u1 + aa1 * a1 + el1 * l1 + f2,
+            ra1 * u2 + el1 * l2,
+            ra2 * u2 + el2 * l2 + f2,
         )
 
 

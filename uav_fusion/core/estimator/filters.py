@@ -137,21 +137,37 @@ class CvFilter:
         return self.kf.q
 
 
+def outer_diff(xa: Sequence[float], xb: Sequence[float]) -> list[float]:
+    """Packed upper triangle of ``d d^T`` with ``d = xa - xb``."""
+    d = [a - b for a, b in zip(xa, xb, strict=True)]
+    return [d[i] * d[j] for i, j in _PAIRS]
+
+
+def mix2(
+    w0: float,
+    w1: float,
+    xa: Sequence[float],
+    xb: Sequence[float],
+    pa: Sequence[float],
+    pb: Sequence[float],
+    dd: Sequence[float],
+) -> tuple[list[float], list[float]]:
+    """Two-component moment match with ``w0 + w1 = 1``: the spread term
+    ``sum_i w_i (x_i - x)(x_i - x)^T`` equals ``w0 w1 d d^T`` (``dd``, from :func:`outer_diff`)."""
+    c = w0 * w1
+    x = [w0 * a + w1 * b for a, b in zip(xa, xb, strict=True)]
+    P = [w0 * u + w1 * v + c * e for u, v, e in zip(pa, pb, dd, strict=True)]
+    return x, P
+
+
 def combine(
     weights: Sequence[float], xs: Sequence[Sequence[float]], ps: Sequence[Sequence[float]]
 ) -> tuple[list[float], list[float]]:
     """Moment-matched mixture of packed Gaussians: ``sum w_j (x_j, P_j + dx dx^T)``."""
-    if len(weights) == 2:  # the common case, written out
+    if len(weights) == 2:  # the common case: P = w0 P0 + w1 P1 + w0 w1 d d^T, d = x0 - x1
         w0, w1 = weights
         xa, xb = xs
-        x = [w0 * a + w1 * b for a, b in zip(xa, xb, strict=True)]
-        da = [a - m for a, m in zip(xa, x, strict=True)]
-        db = [b - m for b, m in zip(xb, x, strict=True)]
-        P = [
-            w0 * (pa + da[i] * da[j]) + w1 * (pb + db[i] * db[j])
-            for pa, pb, i, j in zip(ps[0], ps[1], _PI, _PJ, strict=True)
-        ]
-        return x, P
+        return mix2(w0, w1, xa, xb, ps[0], ps[1], outer_diff(xa, xb))
     x = [0.0] * 6
     for w, xj in zip(weights, xs, strict=True):
         for k in range(6):
@@ -205,9 +221,13 @@ class ImmFilter:
         xs = [m.x for m in modes]
         ps = [m.P for m in modes]
         mixed = []
+        dd = outer_diff(xs[0], xs[1]) if n == 2 else None
         for j in range(n):
             omega = [pi[i][j] * mu[i] / cbar[j] if cbar[j] > 0 else 0.0 for i in range(n)]
-            mixed.append(combine(omega, xs, ps))
+            if dd is not None:
+                mixed.append(mix2(omega[0], omega[1], xs[0], xs[1], ps[0], ps[1], dd))
+            else:
+                mixed.append(combine(omega, xs, ps))
         for m, (x0, p0) in zip(modes, mixed, strict=True):
             m.x = x0
             m.P = p0

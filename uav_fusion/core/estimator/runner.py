@@ -169,9 +169,7 @@ def smooth_steps(steps: list[TrackerStep], lag_s: float) -> list[TrackerStep]:
         smoothed = fixed_lag(entries, lag_s)
         for k, (x, P) in zip(idx, smoothed, strict=True):
             s = steps[k]
-            state = _STATE.pack(*x, *(P[i, j] for i, j in _UPPER))
-            base = Step(s.t, s.source, s.status, s.reason, s.nis, state, s.dim, s.track_id, s.seq)
-            out[k] = TrackerStep(base, s.z, s.score, s.weight, s.mode_probs, s.segment, s.q_eff)
+            out[k] = s.with_state(_STATE.pack(*x, *(P[i, j] for i, j in _UPPER)))
     return out
 
 

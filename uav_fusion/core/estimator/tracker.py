@@ -92,31 +92,59 @@ class TrackerStep(Step):
 
     def __init__(
         self,
-        base: Step,
+        t: float,
+        source: str,
+        status: str,
+        reason: str | None,
+        nis: float | None,
+        state: bytes,
+        dim: int,
+        track_id: int | None,
+        seq: int,
         z: tuple[float, ...],
         score: float | None,
         weight: float | None,
         mode_probs: tuple[float, ...],
         segment: int,
-        q_eff: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        q_eff: tuple[float, float, float],
     ) -> None:
-        super().__init__(
-            base.t,
-            base.source,
-            base.status,
-            base.reason,
-            base.nis,
-            base._state,
-            base.dim,
-            base.track_id,
-            base.seq,
-        )
+        self.t = t
+        self.source = source
+        self.status = status
+        self.reason = reason
+        self.nis = nis
+        self._state = state
+        self._x = None
+        self._P = None
+        self.dim = dim
+        self.track_id = track_id
+        self.seq = seq
         self.z = z
         self.score = score
         self.weight = weight
         self.mode_probs = mode_probs
         self.segment = segment
         self.q_eff = q_eff
+
+    def with_state(self, state: bytes) -> TrackerStep:
+        """A copy with another packed state (x then the upper triangle of P)."""
+        return TrackerStep(
+            self.t,
+            self.source,
+            self.status,
+            self.reason,
+            self.nis,
+            state,
+            self.dim,
+            self.track_id,
+            self.seq,
+            self.z,
+            self.score,
+            self.weight,
+            self.mode_probs,
+            self.segment,
+            self.q_eff,
+        )
 
 
 @dataclass(frozen=True)
@@ -270,8 +298,10 @@ class Tracker:
         if status == DISCARDED:
             self._count(DISCARDED)
             self._count(f"rejected_{reason}")
-        base = Step(t, source, status, reason, nis, state, len(z), track_id, seq)
-        return TrackerStep(base, z, score, weight, probs, self.segment, q)
+        return TrackerStep(
+            t, source, status, reason, nis, state, len(z), track_id, seq, z, score, weight,
+            probs, self.segment, q,
+        )  # fmt: skip
 
     def _drop(self, reason: str) -> None:
         if self.filter is not None:
@@ -331,7 +361,8 @@ class Tracker:
         t = frame.t
         c = self.counters
         out: list[TrackerStep | None] = [None] * len(frame.tracks)
-        objs: list[tuple[int, RadarTrack, RadarObject]] = []
+        objs: list[tuple[int, RadarTrack, RadarObject, PackedR]] = []
+        r_at = self.radar_r.r_at
         for i, trk in enumerate(frame.tracks):
             c["measurements"] = c.get("measurements", 0) + 1
             c["radar_measurements"] = c.get("radar_measurements", 0) + 1
@@ -339,15 +370,18 @@ class Tracker:
             if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
                 out[i] = self._step(t, RADAR, DISCARDED, "invalid", None, z, trk.track_id)
                 continue
-            objs.append((i, trk, self.objects.update(trk)))
+            r = r_at(trk.e, trk.n, trk.u)
+            objs.append((i, trk, self.objects.update(trk, r), r))
         if not self._advance(t):
-            for i, trk, _ in objs:
+            for i, trk, _, _ in objs:
                 z = (trk.e, trk.n, trk.u)
                 out[i] = self._step(t, RADAR, DISCARDED, "out_of_order", None, z, trk.track_id)
             return [s for s in out if s is not None]
         cands: list[tuple[int, RadarTrack, RadarObject, float]] = []
+        rs: dict[int, PackedR] = {}
         rx, ry, rz = self._radar_pos
-        for i, trk, obj in objs:
+        for i, trk, obj, r in objs:
+            rs[i] = r
             d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
             if d2 > self._gate2:
                 z = (trk.e, trk.n, trk.u)
@@ -355,12 +389,15 @@ class Tracker:
             else:
                 cands.append((i, trk, obj, obj.score(self.cfg)))
         if cands:
-            for i, step in self._radar_candidates(t, cands):
+            for i, step in self._radar_candidates(t, cands, rs):
                 out[i] = step
         return [s for s in out if s is not None]
 
     def _radar_candidates(
-        self, t: float, cands: list[tuple[int, RadarTrack, RadarObject, float]]
+        self,
+        t: float,
+        cands: list[tuple[int, RadarTrack, RadarObject, float]],
+        rs: dict[int, PackedR],
     ) -> list[tuple[int, TrackerStep]]:
         cfg = self.cfg
         res: list[tuple[int, TrackerStep]] = []
@@ -370,7 +407,7 @@ class Tracker:
             scored = []
             for i, trk, obj, s in cands:
                 z = (trk.e, trk.n, trk.u)
-                r = self.radar_r.r_at(*z)
+                r = rs[i]
                 nis = f.nis(z, r)
                 ok = nis <= g
                 if self.confirmed:
