@@ -36,6 +36,16 @@ def _edit_tracker(tmp_path: Path, edit: Callable[[dict[str, Any]], None]) -> Pat
     return f
 
 
+def _imm(**changes: Any) -> dict[str, Any]:
+    imm: dict[str, Any] = {
+        "q": [[0.5, 0.5, 0.2], [20.0, 20.0, 5.0]],
+        "transition": [[0.97, 0.03], [0.06, 0.94]],
+        "initial": [0.5, 0.5],
+    }
+    imm.update(changes)
+    return {"model": "imm", "q": [2.0, 2.0, 2.0], "imm": imm}
+
+
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
@@ -45,17 +55,19 @@ def _edit_tracker(tmp_path: Path, edit: Callable[[dict[str, Any]], None]) -> Pat
         (lambda d: d["association"].update(mode="nearest"), "association.mode"),
         (lambda d: d["motion"].update(model="ct"), "motion.model"),
         (
-            lambda d: d["motion"]["imm"].update(transition=[[0.9, 0.2], [0.1, 0.9]]),
+            lambda d: d.update(motion=_imm(transition=[[0.9, 0.2], [0.1, 0.9]])),
             r"motion\.imm\.transition: row 0 sums to 1\.1",
         ),
         (
-            lambda d: d["motion"]["imm"].update(transition=[[1.1, -0.1], [0.1, 0.9]]),
+            lambda d: d.update(motion=_imm(transition=[[1.1, -0.1], [0.1, 0.9]])),
             r"motion\.imm\.transition: entries must lie in \[0, 1\]",
         ),
         (
-            lambda d: d["motion"]["imm"].update(transition=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+            lambda d: d.update(motion=_imm(transition=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])),
             r"motion\.imm\.transition: must be 2x2",
         ),
+        (lambda d: d.update(motion=_imm(q=[[1, 1, 1], [2, -2, 2]])), r"motion\.imm\.q\[1\]"),
+        (lambda d: d.update(motion=_imm(initial=[0.7, 0.7])), r"motion\.imm\.initial"),
         (lambda d: d["measurement"]["radar"].update(sigma_az_deg=-1.0), "sigma_az_deg"),
         (lambda d: d["measurement"]["radar"].update(sigma_range_m=-0.5), "sigma_range_m"),
         (lambda d: d["measurement"]["rf"].update(floor_m=-2.0), r"measurement\.rf\.floor_m"),
@@ -79,12 +91,30 @@ def test_tracker_profiles_load_and_round_trip() -> None:
     for name in ("tracker", "tracker_smoothed"):
         p = load_profile(name)
         assert p.uses_tracker and p.association_mode == "track_score"
-        assert p.motion_model == "imm" and len(p.imm_q) == 2
+        assert p.motion_model == "cv" and p.radar_model == "polar" and p.rf_model == "cep"
         again = profile_from_dict(p.as_dict())
         assert again.imm_transition == p.imm_transition and again.score == p.score
         assert again.smoother_lag_s == p.smoother_lag_s
     assert load_profile("tracker_smoothed").smoother_lag_s == 3.0
     assert not load_profile("paper").uses_tracker
+
+
+def test_an_imm_profile_runs_and_round_trips(tmp_path: Path, site: Site) -> None:
+    from uav_fusion.core.estimator.filters import ImmFilter
+    from uav_fusion.core.estimator.profile import profile_from_dict
+
+    f = _edit_tracker(tmp_path, lambda d: d.update(motion=_imm()))
+    p = load_profile(f)
+    assert p.motion_model == "imm" and p.imm_transition == ((0.97, 0.03), (0.06, 0.94))
+    assert profile_from_dict(p.as_dict()).imm_q == p.imm_q
+    sc = Scene(site, seed=8)
+    sc.build(60.0)
+    tracker = Tracker(p, site)
+    steps = run_tracker(tracker, sc.stream())
+    assert isinstance(tracker.filter, ImmFilter)
+    used = [s for s in steps if s.updated]
+    assert used and len(used[-1].mode_probs) == 2
+    assert all(sc.error(s) < 40.0 for s in used[10:])
 
 
 # --- synthetic scenes -----------------------------------------------------------------------
