@@ -13,7 +13,8 @@ the published estimate is the latest step that is an estimate of a confirmed tra
 (``Step.counted``) at or before the epoch, predicted to the epoch with its velocity, as long
 as the last measurement used by the track is at most the profile's ``max_coast_s`` old.
 Prints per flight and pooled: coverage, mean / p50 / p95 / max 3D error, share of errors
-over 100 m.
+over 100 m, and the average position NEES (3 for an honest covariance; the covariance is
+predicted to the epoch with the profile's CV ``q``).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import numpy.typing as npt
 
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator import Profile, RunResult, load_profile, run_flight
+from uav_fusion.core.estimator.models import cv_process_noise, cv_transition
 from uav_fusion.core.metrics import interpolate_truth
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site, load_site
@@ -39,9 +41,14 @@ DEFAULT_FLIGHT = "default_flight"
 
 
 def grid_errors(
-    result: RunResult, flight: Flight, max_coast_s: float | None, rate_hz: float = 10.0
-) -> tuple[int, FloatArray]:
-    """(airborne epochs, errors of the covered epochs) of a run on a ``rate_hz`` grid."""
+    result: RunResult,
+    flight: Flight,
+    max_coast_s: float | None,
+    q: tuple[float, float, float],
+    rate_hz: float = 10.0,
+) -> tuple[int, FloatArray, FloatArray]:
+    """(airborne epochs, errors and position NEES of the covered epochs) of a run on a
+    ``rate_hz`` grid; the covariance is predicted to the epoch with the CV model's ``q``."""
     t_truth, enu = flight.truth_arrays()
     if t_truth.size < 2:
         return 0, np.zeros(0)
@@ -70,21 +77,28 @@ def grid_errors(
         last_used_t[k] = lu
     idx = np.searchsorted(t_steps, epochs, side="right") - 1
     errs = []
+    nees = []
     limit = math.inf if max_coast_s is None else max_coast_s
     for e, k, tr in zip(epochs, idx, truth, strict=True):
         if k < 0 or last_counted[k] < 0 or e - last_used_t[k] > limit:
             continue
         s = steps[last_counted[k]]
         x = s.x
-        p = x[:3] + x[3:6] * (e - s.t)
-        errs.append(float(np.linalg.norm(p - tr)))
-    return int(epochs.size), np.asarray(errs)
+        dt = e - s.t
+        p = x[:3] + x[3:6] * dt
+        d = p - tr
+        errs.append(float(np.linalg.norm(d)))
+        F = cv_transition(dt)
+        P = (F @ s.P @ F.T + cv_process_noise(dt, q))[:3, :3]
+        nees.append(float(d @ np.linalg.solve(P, d)))
+    return int(epochs.size), np.asarray(errs), np.asarray(nees)
 
 
-def _summary(n_epochs: int, errs: FloatArray) -> str:
+def _summary(n_epochs: int, errs: FloatArray, nees: FloatArray) -> str:
     if errs.size == 0:
         return f"coverage 0.0 % of {n_epochs} epochs"
     return (
+        f"ANEES {nees.mean():6.2f}  "
         f"coverage {100.0 * errs.size / max(n_epochs, 1):5.1f} %  mean {errs.mean():7.1f}  "
         f"p50 {np.percentile(errs, 50):6.1f}  p95 {np.percentile(errs, 95):7.1f}  "
         f"max {errs.max():7.1f} m  >100 m {100.0 * np.mean(errs > 100.0):5.1f} %"
@@ -112,19 +126,23 @@ def speed(folder: Path, site: Site, repeats: int) -> None:
 def accuracy(folders: list[Path], names: list[str], site: Site) -> None:
     profiles: dict[str, Profile] = {n: load_profile(n) for n in names}
     pooled: dict[str, list[FloatArray]] = {n: [] for n in names}
+    pooled_nees: dict[str, list[FloatArray]] = {n: [] for n in names}
     epochs_total = dict.fromkeys(names, 0)
     for i, folder in enumerate(folders):
         flight = load_flight(folder, site)
         print(f"[{i + 1}/{len(folders)}] {folder.name}", file=sys.stderr)
         for n, prof in profiles.items():
             res = run_flight(flight, prof, site)
-            ne, errs = grid_errors(res, flight, prof.max_coast_s)
+            q = prof.q if prof.motion_model == "cv" else prof.imm_q[-1]
+            ne, errs, nees = grid_errors(res, flight, prof.max_coast_s, q)
             pooled[n].append(errs)
+            pooled_nees[n].append(nees)
             epochs_total[n] += ne
-            print(f"  {folder.name:32s} {n:17s} {_summary(ne, errs)}")
+            print(f"  {folder.name:32s} {n:17s} {_summary(ne, errs, nees)}")
     print("pooled:")
     for n in names:
-        print(f"  {n:17s} {_summary(epochs_total[n], np.concatenate(pooled[n]))}")
+        e, v = np.concatenate(pooled[n]), np.concatenate(pooled_nees[n])
+        print(f"  {n:17s} {_summary(epochs_total[n], e, v)}")
 
 
 def main(argv: list[str] | None = None) -> int:
