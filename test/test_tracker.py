@@ -149,6 +149,7 @@ class Scene:
         clutter: bool = False,
         fragment_s: float = 60.0,
         fragment_gap_s: float = 0.0,
+        decoy: Callable[[Scene, float, int], RadarTrack | None] | None = None,
     ) -> None:
         n = int(duration_s * 4)
         for k in range(n):
@@ -165,6 +166,10 @@ class Scene:
                 c[2] += 45.0
                 prob = 0.3 if (k // 40) % 3 == 0 else 0.8
                 tracks.append(self.report(t, CLUTTER_ID, c, prob, np.zeros(3), sd=3.0))
+            if decoy is not None:
+                d = decoy(self, t, k)
+                if d is not None:
+                    tracks.append(d)
             self.frames.append(RadarFrame(t, tuple(tracks)))
             if k % 16 == 8 and rf_ok(t):
                 e, nn = p[:2] + self.rng.normal(0.0, 8.0, 2)
@@ -210,6 +215,47 @@ def test_a_clutter_track_that_is_largest_for_minutes_and_at_times_classed_uav_is
     published = [s for s in steps if s.counted]
     assert max(sc.error(s) for s in published[20:]) < 40.0
     assert tracker.objects.objects[CLUTTER_ID].score(tracker.cfg) < 0
+
+
+DECOY_ID = 777
+
+
+def _ghost(sc: Scene, t: float, k: int) -> RadarTrack:
+    """Multipath ghost: the UAV mirrored below the ground, classed UAV at times."""
+    p = sc.uav(t)
+    g = np.array([p[0], p[1], -p[2]])
+    v = (sc.uav(t + 0.01) - p) / 0.01
+    v[2] = -v[2]
+    return sc.report(t, DECOY_ID, g, 0.7 if (k // 30) % 2 else 0.4, v, sd=8.0)
+
+
+def _vehicle(sc: Scene, t: float, k: int) -> RadarTrack:
+    """A car on a straight road at 12 m/s, 1 m above the ground, classed UAV at times."""
+    p = sc.r0 + np.array([-600.0 + 12.0 * (t % 100.0), 300.0, 0.0])
+    p[2] = 1.0
+    return sc.report(t, DECOY_ID, p, 0.65 if (k // 30) % 2 else 0.35, np.array([12.0, 0, 0]))
+
+
+def _birds(sc: Scene, t: float, k: int) -> RadarTrack:
+    """A flock wandering erratically (jumps of tens of metres), small RCS, classed UAV at
+    times."""
+    rng = sc.rng
+    c = sc.r0 + np.array([250.0 * math.cos(0.01 * t), -300.0, 30.0])
+    p = c + rng.normal(0.0, 25.0, 3)
+    trk = sc.report(t, DECOY_ID, p, 0.6 if (k // 30) % 2 else 0.3, rng.normal(0, 8.0, 3))
+    return RadarTrack(*[getattr(trk, f) for f in RadarTrack.__slots__[:11]], -25.0)
+
+
+@pytest.mark.parametrize("decoy", [_ghost, _vehicle, _birds], ids=["ghost", "vehicle", "birds"])
+def test_decoys_classed_uav_at_times_are_never_followed(
+    site: Site, decoy: Callable[[Scene, float, int], RadarTrack]
+) -> None:
+    sc = Scene(site, seed=9)
+    sc.build(240.0, decoy=decoy, fragment_s=40.0, fragment_gap_s=3.0)
+    _, steps = _run(sc, site)
+    assert not any(s.track_id == DECOY_ID and (s.updated or s.coasted) for s in steps)
+    published = [s for s in steps if s.counted]
+    assert published and max(sc.error(s) for s in published[20:]) < 40.0
 
 
 def test_a_low_class_probability_uav_with_rf_agreement_is_kept(site: Site) -> None:

@@ -7,17 +7,20 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
 
 * class history: exponential moving average (time constant ``class_tau_s``) of the logit of
   the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``;
-* kinematics: an object older than ``stationary_min_age_s`` whose mean speed stays below
-  ``stationary_speed_mps`` is clutter (``-stationary_weight``); one that moves but stays
-  below ``ground_alt_m`` is a ground vehicle (``-ground_weight``); one whose own filter's
-  mean NIS (3 dof) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a bird
-  (``-erratic_weight``);
+* kinematics: an object more than ``below_ground_m`` below the ground (ENU up 0) is a
+  multipath ghost (``-below_ground_weight``); one older than ``stationary_min_age_s`` whose
+  mean speed stays below ``stationary_speed_mps`` is clutter (``-stationary_weight``); one
+  that moves but stays below ``ground_alt_m`` is a ground vehicle (``-ground_weight``); one
+  whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
+  ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
+  bird (``-erratic_weight``);
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
   horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
   capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
   evidence of a UAV);
-* agreement with the fused track: moving average of "this object's report fell inside the
-  UAV track's gate", times ``fused_weight``;
+* agreement with the fused track: moving average of "this object's report had an NIS of at
+  most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
+  the track's R allows for correlated errors), times ``fused_weight``;
 * age: ``age_weight * min(1, age / age_full_s)`` (a track that persists is more likely real).
 """
 
@@ -45,7 +48,9 @@ class ScoreConfig:
     stationary_weight: float = 5.0
     ground_alt_m: float = 4.0
     ground_weight: float = 3.0
-    erratic_nis: float = 12.0
+    below_ground_m: float = 5.0
+    below_ground_weight: float = 8.0
+    erratic_nis: float = 6.0
     bird_rcs_dbsm: float = -15.0
     erratic_weight: float = 2.0
     rf_weight: float = 1.0
@@ -54,9 +59,11 @@ class ScoreConfig:
     rf_window_s: float = 3.0
     fused_weight: float = 1.5
     fused_tau_s: float = 10.0
+    fused_nis: float = 3.0
     age_weight: float = 0.5
     age_full_s: float = 10.0
     object_q: float = 5.0
+    object_floor_m: float = 10.0
     speed_tau_s: float = 5.0
     follow_min: float = 0.0
     init_min: float = 1.0
@@ -125,7 +132,9 @@ class RadarObject:
         """The UAV score at the object's last report (see the module text)."""
         s = cfg.class_weight * self.class_logit
         age = self.age_s
-        if age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
+        if self.up < -cfg.below_ground_m:  # nothing real flies below the ground: multipath
+            s -= cfg.below_ground_weight
+        elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
             s -= cfg.stationary_weight
         elif self.up < cfg.ground_alt_m and self.n_reports > 1:
             s -= cfg.ground_weight

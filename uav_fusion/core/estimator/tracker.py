@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -209,7 +209,13 @@ class Tracker:
         self.radar_r = radar_model_from_profile(profile, site)
         self.rf_r = rf_model_from_profile(profile)
         self.robust = robust_from_profile(profile)
-        self.objects = ObjectTable(self.cfg, self.radar_r)
+        r_obj = self.radar_r
+        if isinstance(r_obj, PolarRadarR):
+            # each object's own filter sees the per-report error (its erratic-motion cue
+            # would vanish under the UAV track's floor for correlated errors)
+            r_obj = replace(r_obj, floor_m=min(r_obj.floor_m, self.cfg.object_floor_m))
+        self.objects = ObjectTable(self.cfg, r_obj)
+        self._own_r = r_obj is not self.radar_r
         self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
         self._g2 = nis_gate(profile.nis_probability, 2)
         self._g3 = nis_gate(profile.nis_probability, 3)
@@ -371,7 +377,7 @@ class Tracker:
                 out[i] = self._step(t, RADAR, DISCARDED, "invalid", None, z, trk.track_id)
                 continue
             r = r_at(trk.e, trk.n, trk.u)
-            objs.append((i, trk, self.objects.update(trk, r), r))
+            objs.append((i, trk, self.objects.update(trk, None if self._own_r else r), r))
         if not self._advance(t):
             for i, trk, _, _ in objs:
                 z = (trk.e, trk.n, trk.u)
@@ -411,7 +417,7 @@ class Tracker:
                 nis = f.nis(z, r)
                 ok = nis <= g
                 if self.confirmed:
-                    self.objects.mark_fused(obj, ok, t)
+                    self.objects.mark_fused(obj, nis <= cfg.fused_nis, t)
                 scored.append((i, trk, obj, s, z, r, nis, ok))
             if not self.confirmed:
                 # a tentative RF track: only an object strong enough to start a track may
