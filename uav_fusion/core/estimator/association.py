@@ -167,7 +167,8 @@ class ObjectTable:
         if r is None:
             r = self.radar_r.r_at(trk.e, trk.n, trk.u)
         kf = obj.kf
-        if kf is None or dt < 0:
+        fresh = kf is None or dt < 0
+        if fresh:
             kf = obj.kf = CvKalman((cfg.object_q, cfg.object_q, cfg.object_q))
             kf.x = [trk.e, trk.n, trk.u, 0.0, 0.0, 0.0]
             v = 100.0
@@ -182,13 +183,19 @@ class ObjectTable:
             dt = 0.0
             obj.up = trk.u
             obj.rcs_mean = trk.rcs_dbsm if trk.rcs_dbsm is not None else 0.0
-        else:
+        # one smoothing factor per time constant for this interval (the EMAs below)
+        tau = cfg.speed_tau_s
+        a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
+        b = 1.0 - a
+        assert kf is not None
+        if not fresh:
             kf.predict(dt)
             nis = kf.update3(trk.e, trk.n, trk.u, r)
             if math.isfinite(nis):
-                obj.nis_mean = _ema(obj.nis_mean, min(nis, 100.0), dt, cfg.speed_tau_s)
-        if trk.vel_ned is not None and all(math.isfinite(v) for v in trk.vel_ned):
-            vn, ve, vd = trk.vel_ned
+                obj.nis_mean = a * obj.nis_mean + b * min(nis, 100.0)
+        vel = trk.vel_ned
+        if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
+            vn, ve, vd = vel
             spd = math.sqrt(vn * vn + ve * ve + vd * vd)
         else:
             x = kf.x
@@ -196,17 +203,18 @@ class ObjectTable:
         if obj.n_reports == 0:
             obj.speed = spd
         else:
-            obj.speed = _ema(obj.speed, spd, dt, cfg.speed_tau_s)
-            obj.up = _ema(obj.up, trk.u, dt, cfg.speed_tau_s)
-            if trk.rcs_dbsm is not None and math.isfinite(trk.rcs_dbsm):
-                obj.rcs_mean = _ema(obj.rcs_mean, trk.rcs_dbsm, dt, cfg.speed_tau_s)
+            obj.speed = a * obj.speed + b * spd
+            obj.up = a * obj.up + b * trk.u
+            rcs = trk.rcs_dbsm
+            if rcs is not None and math.isfinite(rcs):
+                obj.rcs_mean = a * obj.rcs_mean + b * rcs
         p = trk.uav_prob
         if p is not None and math.isfinite(p):
             c = cfg.class_clip
             pc = min(max(p, 1e-6), 1.0 - 1e-6)
             lg = max(-c, min(c, math.log(pc / (1.0 - pc))))
-            obj.class_logit = lg if obj.n_reports == 0 else _ema(
-                obj.class_logit, lg, dt, cfg.class_tau_s
+            obj.class_logit = (
+                lg if obj.n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
             )
         obj.n_reports += 1
         obj.last_t = t

@@ -210,12 +210,15 @@ class Tracker:
         self.rf_r = rf_model_from_profile(profile)
         self.robust = robust_from_profile(profile)
         r_obj = self.radar_r
+        self._extra_var = 0.0  # UAV-track R = object R + this on each diagonal element
         if isinstance(r_obj, PolarRadarR):
             # each object's own filter sees the per-report error (its erratic-motion cue
             # would vanish under the UAV track's floor for correlated errors)
-            r_obj = replace(r_obj, floor_m=min(r_obj.floor_m, self.cfg.object_floor_m))
+            f_obj = min(r_obj.floor_m, self.cfg.object_floor_m)
+            self._extra_var = r_obj.floor_m**2 - f_obj**2
+            r_obj = replace(r_obj, floor_m=f_obj)
+        self._r_obj = r_obj
         self.objects = ObjectTable(self.cfg, r_obj)
-        self._own_r = r_obj is not self.radar_r
         self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
         self._g2 = nis_gate(profile.nis_probability, 2)
         self._g3 = nis_gate(profile.nis_probability, 3)
@@ -368,7 +371,8 @@ class Tracker:
         c = self.counters
         out: list[TrackerStep | None] = [None] * len(frame.tracks)
         objs: list[tuple[int, RadarTrack, RadarObject, PackedR]] = []
-        r_at = self.radar_r.r_at
+        r_at = self._r_obj.r_at
+        dv = self._extra_var
         for i, trk in enumerate(frame.tracks):
             c["measurements"] = c.get("measurements", 0) + 1
             c["radar_measurements"] = c.get("radar_measurements", 0) + 1
@@ -376,8 +380,9 @@ class Tracker:
             if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
                 out[i] = self._step(t, RADAR, DISCARDED, "invalid", None, z, trk.track_id)
                 continue
-            r = r_at(trk.e, trk.n, trk.u)
-            objs.append((i, trk, self.objects.update(trk, None if self._own_r else r), r))
+            ro = r_at(trk.e, trk.n, trk.u)
+            r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
+            objs.append((i, trk, self.objects.update(trk, ro), r))
         if not self._advance(t):
             for i, trk, _, _ in objs:
                 z = (trk.e, trk.n, trk.u)
