@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         sel = "" if info.selected_track_id is None else f", track {info.selected_track_id}"
         print(
             f"  radar: {info.radar_reports} reports in {info.radar_frames} frames; "
-            f"{info.radar_selected} to the filter ({profile.radar_selection}{sel})"
+            f"{info.radar_selected} to the filter ({profile.association_mode}{sel})"
         )
         print(f"  rf: {info.rf_fixes} fixes of {info.rf_attempts} attempts")
     pc = result.paper_counts()

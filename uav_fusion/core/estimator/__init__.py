@@ -1,4 +1,5 @@
-"""The estimator: the paper's gated asynchronous constant-velocity Kalman filter.
+"""The estimator: the paper's gated asynchronous constant-velocity Kalman filter, and the
+tracker (every radar object scored, component filters, smoothing; ``tracker.py``).
 
 Public API (pure Python + numpy/scipy, no ROS)::
 
@@ -19,7 +20,14 @@ from uav_fusion.core.estimator.models import (
 )
 from uav_fusion.core.estimator.noise import RNoiseEstimate, estimate_r
 from uav_fusion.core.estimator.profile import Profile, load_profile, profile_from_dict
-from uav_fusion.core.estimator.runner import RunResult, run_flight, run_stream
+from uav_fusion.core.estimator.runner import (
+    RunResult,
+    run_flight,
+    run_stream,
+    run_tracker,
+    smooth_steps,
+    tracker_stream,
+)
 from uav_fusion.core.estimator.selection import (
     StreamInfo,
     build_stream,
@@ -27,6 +35,7 @@ from uav_fusion.core.estimator.selection import (
     largest_track_id,
 )
 from uav_fusion.core.estimator.track import STATUSES, FusionEstimator, Step
+from uav_fusion.core.estimator.tracker import Tracker, TrackerStep, TrackEstimate
 
 __all__ = [
     "STATUSES",
@@ -37,6 +46,9 @@ __all__ = [
     "RunResult",
     "Step",
     "StreamInfo",
+    "TrackEstimate",
+    "Tracker",
+    "TrackerStep",
     "build_stream",
     "cv_process_noise",
     "cv_transition",
@@ -51,4 +63,7 @@ __all__ = [
     "profile_from_dict",
     "run_flight",
     "run_stream",
+    "run_tracker",
+    "smooth_steps",
+    "tracker_stream",
 ]

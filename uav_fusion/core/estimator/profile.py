@@ -7,7 +7,7 @@ paper's estimator; other files in that folder (or any path) can be loaded the sa
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +15,8 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.estimator.association import ScoreConfig, score_keys
+from uav_fusion.core.estimator.components import validate_transition
 from uav_fusion.core.radar_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.yamlio import read_yaml_file
@@ -23,7 +25,13 @@ from uav_fusion.resources import config_path
 FloatArray = npt.NDArray[np.float64]
 
 SELECTIONS = ("largest_track", "online")
+ASSOCIATIONS = (*SELECTIONS, "track_score")
+MOTION_MODELS = ("cv", "imm")
+RADAR_MODELS = ("fixed", "polar")
+RF_MODELS = ("fixed", "cep")
+ROBUST = ("none", "student_t", "huber")
 SOURCES = (RADAR, RF)
+Q3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -54,7 +62,42 @@ class Profile:
     raw_radar_min_mean_uav_prob: float | None = DEFAULT_MIN_MEAN_UAV_PROB
     description: str = ""
     r_note: str = ""
+    # --- tracker components (the paper's estimator uses none of these) ---
+    motion_model: str = "cv"  # cv | imm
+    imm_q: tuple[Q3, ...] = ()  # per mode
+    imm_transition: tuple[tuple[float, ...], ...] = ()  # Markov matrix, row i: from mode i
+    imm_initial: tuple[float, ...] = ()
+    radar_model: str = "fixed"  # fixed (r_radar) | polar
+    radar_sigma_range_m: float = 1.0
+    radar_sigma_az_deg: float = 1.5
+    radar_sigma_el_deg: float = 1.5
+    radar_floor_m: float = 0.0
+    rf_model: str = "fixed"  # fixed (r_rf) | cep
+    rf_cep_scale: float = 1.0
+    rf_floor_m: float = 5.0
+    rf_ref_sensors: int = 4
+    rf_sensor_exponent: float = 0.0
+    rf_max_cep_m: float | None = None  # RF fixes with a larger CEP are discarded
+    robust: str = "none"  # none | student_t | huber
+    robust_dof: float = 4.0
+    robust_huber_k: float = 1.5
+    vz_hold_after_s: float | None = None  # RF-only: pseudo-measurement vz = 0 after this long
+    vz_hold_sigma_mps: float = 1.0
+    association: str | None = None  # None: radar_selection (paper); "track_score": tracker
+    score: ScoreConfig = field(default_factory=ScoreConfig)
+    smoother_lag_s: float | None = None  # fixed-lag smoothing of the tracker's steps
     source: Path | None = field(default=None, compare=False)
+
+    @property
+    def association_mode(self) -> str:
+        """``largest_track`` / ``online`` (the paper's estimator) or ``track_score``."""
+        return self.association or self.radar_selection
+
+    @property
+    def uses_tracker(self) -> bool:
+        """Run by :class:`~uav_fusion.core.estimator.tracker.Tracker` (every radar object)
+        rather than the paper's :class:`~uav_fusion.core.estimator.track.FusionEstimator`."""
+        return self.association == "track_score"
 
     def with_changes(self, **changes: Any) -> Profile:
         """A copy with some fields replaced (validated again)."""
@@ -64,7 +107,7 @@ class Profile:
 
     def as_dict(self) -> dict[str, Any]:
         """The profile as the YAML document :func:`profile_from_dict` reads."""
-        return {
+        out: dict[str, Any] = {
             "name": self.name,
             "description": self.description,
             "motion": {"model": "cv", "q": [float(v) for v in self.q]},
@@ -94,6 +137,41 @@ class Profile:
             },
             "evaluation": {"raw_radar_min_mean_uav_prob": self.raw_radar_min_mean_uav_prob},
         }
+        if self.uses_tracker:
+            d = out
+            d["motion"]["model"] = self.motion_model
+            if self.motion_model == "imm":
+                d["motion"]["imm"] = {
+                    "q": [list(q) for q in self.imm_q],
+                    "transition": [list(r) for r in self.imm_transition],
+                    "initial": list(self.imm_initial),
+                }
+            d["measurement"]["radar"].update(
+                model=self.radar_model,
+                sigma_range_m=self.radar_sigma_range_m,
+                sigma_az_deg=self.radar_sigma_az_deg,
+                sigma_el_deg=self.radar_sigma_el_deg,
+                floor_m=self.radar_floor_m,
+            )
+            d["measurement"]["rf"].update(
+                model=self.rf_model,
+                cep_scale=self.rf_cep_scale,
+                floor_m=self.rf_floor_m,
+                ref_sensors=self.rf_ref_sensors,
+                sensor_exponent=self.rf_sensor_exponent,
+                max_cep_m=self.rf_max_cep_m,
+            )
+            d["update"] = {
+                "robust": self.robust,
+                "dof": self.robust_dof,
+                "huber_k": self.robust_huber_k,
+                "vz_hold_after_s": self.vz_hold_after_s,
+                "vz_hold_sigma_mps": self.vz_hold_sigma_mps,
+            }
+            d["association"] = {"mode": "track_score", **asdict(self.score)}
+            del d["radar_selection"]
+            d["smoother"] = {"lag_s": self.smoother_lag_s}
+        return out
 
 
 _KEYS: dict[str, tuple[str, ...]] = {
@@ -107,11 +185,20 @@ _KEYS: dict[str, tuple[str, ...]] = {
         "sources",
         "track",
         "evaluation",
+        "update",
+        "association",
+        "smoother",
     ),
-    "motion": ("model", "q"),
+    "motion": ("model", "q", "imm"),
+    "motion.imm": ("q", "transition", "initial"),
     "measurement": ("radar", "rf", "note"),
-    "measurement.radar": ("R",),
-    "measurement.rf": ("R",),
+    "measurement.radar": ("R", "model", "sigma_range_m", "sigma_az_deg", "sigma_el_deg", "floor_m"),
+    "measurement.rf": (
+        *("R", "model", "cep_scale", "floor_m", "ref_sensors", "sensor_exponent", "max_cep_m"),
+    ),
+    "update": ("robust", "dof", "huber_k", "vz_hold_after_s", "vz_hold_sigma_mps"),
+    "association": ("mode", *score_keys()),
+    "smoother": ("lag_s",),
     "gating": ("range_gate_m", "nis_probability", "min_uav_prob"),
     "sources": (RADAR, RF),
     "track": (
@@ -221,6 +308,81 @@ def _validate(p: Profile, where: str) -> None:
         raise ConfigError(f"{where}: track.max_consecutive_rejections must be >= 1 or null")
     if p.max_coast_s is not None and not p.max_coast_s > 0:
         raise ConfigError(f"{where}: track.max_coast_s must be > 0 or null")
+    _validate_tracker(p, where)
+
+
+def _validate_tracker(p: Profile, where: str) -> None:
+    for field_name, value in (
+        ("motion_model", p.motion_model),
+        ("radar_model", p.radar_model),
+        ("rf_model", p.rf_model),
+        ("robust", p.robust),
+    ):
+        allowed = {
+            "motion_model": MOTION_MODELS,
+            "radar_model": RADAR_MODELS,
+            "rf_model": RF_MODELS,
+            "robust": ROBUST,
+        }[field_name]
+        if value not in allowed:
+            raise ConfigError(f"{where}: {field_name} {value!r} is not one of {allowed}")
+    if p.association is not None and p.association != "track_score":
+        raise ConfigError(f"{where}: association.mode {p.association!r} is not track_score")
+    for key, v in (
+        ("measurement.radar.sigma_range_m", p.radar_sigma_range_m),
+        ("measurement.radar.sigma_az_deg", p.radar_sigma_az_deg),
+        ("measurement.radar.sigma_el_deg", p.radar_sigma_el_deg),
+        ("measurement.radar.floor_m", p.radar_floor_m),
+        ("measurement.rf.floor_m", p.rf_floor_m),
+    ):
+        if not v >= 0:
+            raise ConfigError(f"{where}: {key} must be >= 0 (a standard deviation), got {v}")
+    if p.rf_max_cep_m is not None and not p.rf_max_cep_m > 0:
+        raise ConfigError(f"{where}: measurement.rf.max_cep_m must be > 0 or null")
+    if not p.rf_cep_scale > 0:
+        raise ConfigError(f"{where}: measurement.rf.cep_scale must be > 0")
+    if p.rf_ref_sensors < 1:
+        raise ConfigError(f"{where}: measurement.rf.ref_sensors must be >= 1")
+    if p.radar_model == "polar" and p.radar_sigma_range_m + p.radar_floor_m <= 0:
+        raise ConfigError(
+            f"{where}: measurement.radar: the polar R needs sigma_range_m or floor_m > 0"
+        )
+    if not p.robust_dof > 0:
+        raise ConfigError(f"{where}: update.dof must be > 0")
+    if not p.robust_huber_k > 0:
+        raise ConfigError(f"{where}: update.huber_k must be > 0")
+    if p.vz_hold_after_s is not None and not p.vz_hold_after_s >= 0:
+        raise ConfigError(f"{where}: update.vz_hold_after_s must be >= 0 or null")
+    if not p.vz_hold_sigma_mps > 0:
+        raise ConfigError(f"{where}: update.vz_hold_sigma_mps must be > 0")
+    if p.motion_model == "imm":
+        n = len(p.imm_q)
+        if n < 2:
+            raise ConfigError(f"{where}: motion.imm.q needs at least 2 modes")
+        for i, q in enumerate(p.imm_q):
+            if len(q) != 3 or any(not np.isfinite(v) or v < 0 for v in q):
+                raise ConfigError(f"{where}: motion.imm.q[{i}] must be three finite values >= 0")
+        try:
+            validate_transition(p.imm_transition, n, f"{where}: motion.imm.transition")
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        if len(p.imm_initial) != n or any(v < 0 for v in p.imm_initial) or not (
+            abs(sum(p.imm_initial) - 1.0) <= 1e-9
+        ):
+            raise ConfigError(
+                f"{where}: motion.imm.initial must be {n} probabilities >= 0 summing to 1"
+            )
+    if p.smoother_lag_s is not None and not p.smoother_lag_s >= 0:
+        raise ConfigError(f"{where}: smoother.lag_s must be >= 0 or null")
+    if p.smoother_lag_s is not None and not p.uses_tracker:
+        raise ConfigError(f"{where}: smoother.lag_s needs association.mode track_score")
+    sc = p.score
+    for key in score_keys():
+        v = getattr(sc, key)
+        if key in ("follow_min", "init_min", "bird_rcs_dbsm"):
+            continue
+        if not v >= 0:
+            raise ConfigError(f"{where}: association.{key} must be >= 0, got {v}")
 
 
 def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
@@ -231,8 +393,11 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     _check_keys(doc, "", where)
     motion = _section(doc, "motion", where)
     model = str(motion.get("model", "cv"))
-    if model != "cv":
-        raise ConfigError(f"{where}: motion.model {model!r} is not supported (only 'cv')")
+    if model not in MOTION_MODELS:
+        raise ConfigError(
+            f"{where}: motion.model {model!r} is not supported "
+            f"(known components: {', '.join(MOTION_MODELS)})"
+        )
     q_raw = motion.get("q")
     if isinstance(q_raw, int | float):
         q_list = [q_raw] * 3
@@ -250,8 +415,16 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     sources = _section(doc, "sources", where)
     track = _section(doc, "track", where)
     evaluation = _section(doc, "evaluation", where)
+    update = _section(doc, "update", where)
+    assoc = _section(doc, "association", where)
+    smoother = _section(doc, "smoother", where)
+    imm = _section(motion, "imm", f"{where}: motion")
     for name, sec in (
         ("motion", motion),
+        ("motion.imm", imm),
+        ("update", update),
+        ("association", assoc),
+        ("smoother", smoother),
         ("measurement", meas),
         ("measurement.radar", radar),
         ("measurement.rf", rf),
@@ -275,6 +448,16 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     if max_rej is not None and (not isinstance(max_rej, int) or isinstance(max_rej, bool)):
         raise ConfigError(f"{where}: track.max_consecutive_rejections must be an integer or null")
     min_prob = _opt_float(gating, "min_uav_prob", f"{where}: gating", None)
+    extra = _tracker_fields(model, imm, radar, rf, update, assoc, smoother, where)
+    selection = str(doc.get("radar_selection", "largest_track"))
+    if extra.get("association") == "track_score":
+        if "radar_selection" in doc:
+            raise ConfigError(
+                f"{where}: radar_selection and association.mode track_score exclude each other"
+            )
+        selection = "online"
+    elif "mode" in assoc:
+        selection = str(assoc["mode"])
     p = Profile(
         name=str(doc.get("name", source.stem if source else "profile")),
         q=(q[0], q[1], q[2]),
@@ -283,7 +466,7 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         range_gate_m=_opt_float(gating, "range_gate_m", f"{where}: gating", 800.0),
         nis_probability=_float(gating, "nis_probability", f"{where}: gating", 0.95),
         min_uav_prob=min_prob,
-        radar_selection=str(doc.get("radar_selection", "largest_track")),
+        radar_selection=selection,
         use_radar=bool(sources.get(RADAR, True)),
         use_rf=bool(sources.get(RF, True)),
         init_sources=tuple(str(s) for s in init_sources),
@@ -305,9 +488,110 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         description=str(doc.get("description", "") or ""),
         r_note=str(meas.get("note", "") or ""),
         source=source,
+        **extra,
     )
     _validate(p, where)
     return p
+
+
+def _choice(d: dict[str, Any], key: str, allowed: tuple[str, ...], default: str, at: str) -> str:
+    v = str(d.get(key, default))
+    if v not in allowed:
+        raise ConfigError(
+            f"{at}.{key}: {v!r} is not a known component (one of {', '.join(allowed)})"
+        )
+    return v
+
+
+def _q3(v: Any, at: str) -> Q3:
+    if isinstance(v, int | float) and not isinstance(v, bool):
+        v = [v] * 3
+    if not isinstance(v, list) or len(v) != 3:
+        raise ConfigError(f"{at}: must be a number or a list of 3 numbers")
+    q = tuple(_float({"q": x}, "q", at, None) for x in v)
+    return (q[0], q[1], q[2])
+
+
+def _tracker_fields(
+    model: str,
+    imm: dict[str, Any],
+    radar: dict[str, Any],
+    rf: dict[str, Any],
+    update: dict[str, Any],
+    assoc: dict[str, Any],
+    smoother: dict[str, Any],
+    where: str,
+) -> dict[str, Any]:
+    """The tracker's component choices (keys absent: the paper's defaults)."""
+    out: dict[str, Any] = {"motion_model": model}
+    if model == "imm":
+        qs = imm.get("q")
+        if not isinstance(qs, list) or len(qs) < 2:
+            raise ConfigError(f"{where}: motion.imm.q must list one q per mode (at least 2)")
+        out["imm_q"] = tuple(_q3(q, f"{where}: motion.imm.q[{i}]") for i, q in enumerate(qs))
+        n = len(qs)
+        try:
+            out["imm_transition"] = validate_transition(
+                imm.get("transition"), n, f"{where}: motion.imm.transition"
+            )
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        init = imm.get("initial", [1.0 / n] * n)
+        if not isinstance(init, list) or len(init) != n:
+            raise ConfigError(f"{where}: motion.imm.initial must list {n} probabilities")
+        out["imm_initial"] = tuple(
+            _float({"initial": v}, "initial", f"{where}: motion.imm", None) for v in init
+        )
+    elif imm:
+        raise ConfigError(f"{where}: motion.imm is set but motion.model is {model!r}")
+    at_r = f"{where}: measurement.radar"
+    out["radar_model"] = _choice(radar, "model", RADAR_MODELS, "fixed", at_r)
+    for key, name, default in (
+        ("sigma_range_m", "radar_sigma_range_m", 1.0),
+        ("sigma_az_deg", "radar_sigma_az_deg", 1.5),
+        ("sigma_el_deg", "radar_sigma_el_deg", 1.5),
+        ("floor_m", "radar_floor_m", 0.0),
+    ):
+        out[name] = _float(radar, key, at_r, default)
+    at_f = f"{where}: measurement.rf"
+    out["rf_model"] = _choice(rf, "model", RF_MODELS, "fixed", at_f)
+    out["rf_cep_scale"] = _float(rf, "cep_scale", at_f, 1.0)
+    out["rf_floor_m"] = _float(rf, "floor_m", at_f, 5.0)
+    out["rf_sensor_exponent"] = _float(rf, "sensor_exponent", at_f, 0.0)
+    out["rf_max_cep_m"] = _opt_float(rf, "max_cep_m", at_f, None)
+    ref = rf.get("ref_sensors", 4)
+    if not isinstance(ref, int) or isinstance(ref, bool):
+        raise ConfigError(f"{at_f}.ref_sensors: must be an integer, got {ref!r}")
+    out["rf_ref_sensors"] = ref
+    at_u = f"{where}: update"
+    out["robust"] = _choice(update, "robust", ROBUST, "none", at_u)
+    out["robust_dof"] = _float(update, "dof", at_u, 4.0)
+    out["robust_huber_k"] = _float(update, "huber_k", at_u, 1.5)
+    out["vz_hold_after_s"] = _opt_float(update, "vz_hold_after_s", at_u, None)
+    out["vz_hold_sigma_mps"] = _float(update, "vz_hold_sigma_mps", at_u, 1.0)
+    mode = _choice(assoc, "mode", ASSOCIATIONS, "largest_track", f"{where}: association")
+    if mode == "track_score":
+        out["association"] = mode
+        vals: dict[str, Any] = {}
+        defaults = ScoreConfig()
+        for key in score_keys():
+            if key in assoc:
+                if key == "init_min_reports":
+                    v = assoc[key]
+                    if not isinstance(v, int) or isinstance(v, bool):
+                        raise ConfigError(f"{where}: association.{key} must be an integer")
+                    vals[key] = v
+                else:
+                    vals[key] = _float(assoc, key, f"{where}: association", getattr(defaults, key))
+        out["score"] = ScoreConfig(**vals)
+    elif len(assoc) > 1:
+        raise ConfigError(f"{where}: association score keys need association.mode track_score")
+    lag = smoother.get("lag_s")
+    if isinstance(lag, float) and lag == float("inf"):
+        out["smoother_lag_s"] = lag  # .inf: offline RTS over each track segment
+    else:
+        out["smoother_lag_s"] = _opt_float(smoother, "lag_s", f"{where}: smoother", None)
+    return out
 
 
 def profile_path(path_or_name: str | Path) -> Path:

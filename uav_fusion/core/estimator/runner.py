@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
-from collections.abc import Iterable
+import math
+import struct
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,8 +14,10 @@ import numpy.typing as npt
 
 from uav_fusion.core.estimator.profile import Profile
 from uav_fusion.core.estimator.selection import StreamInfo, StreamItem, build_stream
+from uav_fusion.core.estimator.smoothing import Filtered, fixed_lag
 from uav_fusion.core.estimator.track import FusionEstimator, Step
-from uav_fusion.core.records import RADAR, RF, Flight
+from uav_fusion.core.estimator.tracker import Tracker, TrackerStep
+from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
@@ -119,8 +123,89 @@ def run_stream(est: FusionEstimator, stream: Iterable[StreamItem]) -> list[Step]
     return steps
 
 
+def tracker_stream(flight: Flight, profile: Profile) -> Iterator[RadarFrame | RfAttempt]:
+    """A flight's raw radar frames and successful RF attempts in (time, radar before RF, file
+    position) order: what the :class:`Tracker` consumes."""
+    keyed: list[tuple[float, int, int]] = []
+    if profile.use_radar:
+        keyed.extend((fr.t, 0, i) for i, fr in enumerate(flight.radar) if fr.tracks)
+    if profile.use_rf:
+        keyed.extend((a.t, 1, i) for i, a in enumerate(flight.rf) if a.ok)
+    keyed.sort()
+    for _, rank, i in keyed:
+        yield flight.radar[i] if rank == 0 else flight.rf[i]
+
+
+def run_tracker(tracker: Tracker, stream: Iterable[RadarFrame | RfAttempt]) -> list[TrackerStep]:
+    """Feed radar frames and RF attempts through a :class:`Tracker`."""
+    steps: list[TrackerStep] = []
+    for item in stream:
+        if isinstance(item, RadarFrame):
+            steps.extend(tracker.process_radar_frame(item))
+        else:
+            steps.extend(tracker.process_rf(item))
+    return steps
+
+
+_STATE = struct.Struct("27d")
+_UPPER = tuple((i, j) for i in range(6) for j in range(i, 6))
+
+
+def smooth_steps(steps: list[TrackerStep], lag_s: float) -> list[TrackerStep]:
+    """The steps with the state of every counted step (an estimate of a confirmed track)
+    replaced by its fixed-lag smoothed state (``lag_s``; ``math.inf``: offline RTS over
+    each track segment)."""
+    by_segment: dict[int, list[int]] = {}
+    for k, s in enumerate(steps):
+        if s.counted:
+            by_segment.setdefault(s.segment, []).append(k)
+    out = list(steps)
+    for idx in by_segment.values():
+        entries = []
+        for k in idx:
+            s = steps[k]
+            q = s.q_eff
+            entries.append(Filtered(s.t, s.x, s.P, q))
+        smoothed = fixed_lag(entries, lag_s)
+        for k, (x, P) in zip(idx, smoothed, strict=True):
+            s = steps[k]
+            out[k] = s.with_state(_STATE.pack(*x, *(P[i, j] for i, j in _UPPER)))
+    return out
+
+
+def _run_tracker_flight(flight: Flight, profile: Profile, site: Site) -> RunResult:
+    tracker = Tracker(profile, site)
+    steps = run_tracker(tracker, tracker_stream(flight, profile))
+    if profile.smoother_lag_s is not None:
+        steps = smooth_steps(steps, profile.smoother_lag_s)
+    reports = sum(len(fr.tracks) for fr in flight.radar) if profile.use_radar else 0
+    info = StreamInfo(
+        radar_frames=len(flight.radar) if profile.use_radar else 0,
+        radar_reports=reports,
+        radar_selected=reports,
+        not_selected=0,
+        selected_track_id=None,
+        rf_attempts=len(flight.rf) if profile.use_rf else 0,
+        rf_fixes=sum(
+            1 for a in flight.rf if a.ok and math.isfinite(a.e) and math.isfinite(a.n)
+        )
+        if profile.use_rf
+        else 0,
+    )
+    counters = dict(tracker.counters)
+    counters["radar_reports"] = reports
+    counters["radar_objects"] = len(tracker.objects.objects)
+    return RunResult(
+        steps=list[Step](steps), counters=counters, info=info, profile_name=profile.name
+    )
+
+
 def run_flight(flight: Flight, profile: Profile, site: Site) -> RunResult:
-    """``flight_measurements`` fed through a fresh :class:`FusionEstimator`."""
+    """``flight_measurements`` fed through a fresh :class:`FusionEstimator`; a profile with
+    ``association.mode: track_score`` runs the :class:`Tracker` over every radar report
+    instead (then fixed-lag smoothing when ``smoother.lag_s`` is set)."""
+    if profile.uses_tracker:
+        return _run_tracker_flight(flight, profile, site)
     stream, info = build_stream(flight, profile, site)
     est = FusionEstimator(profile, site)
     steps = run_stream(est, stream)

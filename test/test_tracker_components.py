@@ -1,0 +1,233 @@
+"""Tracker components: measurement models (hand cases), robust weights (hand cases), the IMM
+transition check, M-of-N and deleter, and the CV / IMM filters against filterpy."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from filterpy.kalman import IMMEstimator, KalmanFilter
+
+from uav_fusion.core.estimator.components import (
+    CEP_PER_SIGMA,
+    CepRfR,
+    Deleter,
+    HuberWeight,
+    MofN,
+    PolarRadarR,
+    StudentTWeight,
+    packed_to_array,
+    validate_transition,
+)
+from uav_fusion.core.estimator.filters import CvFilter, ImmFilter, packed_arrays
+from uav_fusion.core.estimator.kalman import pack_r
+from uav_fusion.core.estimator.models import (
+    cv_process_noise,
+    cv_transition,
+    kf_predict,
+    kf_update_joseph,
+    position_h,
+)
+
+RAD = math.radians
+
+
+# --- polar radar R ------------------------------------------------------------------------
+def test_polar_r_due_north_is_diagonal_with_cross_range_growing_with_range() -> None:
+    m = PolarRadarR((0.0, 0.0, 0.0), 2.0, RAD(1.0), RAD(0.5))
+    for r in (100.0, 1000.0):
+        R = packed_to_array(m.r_at(0.0, r, 0.0))
+        # east = azimuth arc, north = range, up = elevation arc
+        expect = np.diag([(r * RAD(1.0)) ** 2, 4.0, (r * RAD(0.5)) ** 2])
+        np.testing.assert_allclose(R, expect, atol=1e-9)
+
+
+def test_polar_r_due_east_and_the_floor() -> None:
+    m = PolarRadarR((10.0, 20.0, 5.0), 3.0, RAD(2.0), RAD(1.0), floor_m=4.0)
+    R = packed_to_array(m.r_at(510.0, 20.0, 5.0))  # 500 m east of the radar
+    expect = np.diag([9.0 + 16.0, (500 * RAD(2.0)) ** 2 + 16.0, (500 * RAD(1.0)) ** 2 + 16.0])
+    np.testing.assert_allclose(R, expect, atol=1e-9)
+
+
+def test_polar_r_is_a_rotation_of_the_polar_covariance() -> None:
+    m = PolarRadarR((0.0, 0.0, 0.0), 1.5, RAD(1.2), RAD(0.8))
+    p = np.array([300.0, -400.0, 120.0])
+    R = packed_to_array(m.r_at(*p))
+    r = np.linalg.norm(p)
+    rho = np.hypot(p[0], p[1])
+    ev = np.sort(np.linalg.eigvalsh(R))
+    expect = np.sort([1.5**2, (rho * RAD(1.2)) ** 2, (r * RAD(0.8)) ** 2])
+    np.testing.assert_allclose(ev, expect, rtol=1e-9)
+    u_r = p / r  # the range direction is an eigenvector with the range variance
+    np.testing.assert_allclose(R @ u_r, 1.5**2 * u_r, atol=1e-9)
+
+
+# --- RF R from CEP --------------------------------------------------------------------------
+def test_cep_r_hand_cases() -> None:
+    m = CepRfR(scale=2.0, floor_m=5.0, ref_sensors=4, exponent=1.0, fallback=(9.0, 0.0, 9.0))
+    s = 2.0 * 20.0 / CEP_PER_SIGMA  # CEP 20 m, 4 sensors
+    assert m.r_for(20.0, 4) == pytest.approx((s * s, 0.0, s * s))
+    s3 = s * 4 / 3  # three sensors: trusted less
+    assert m.r_for(20.0, 3) == pytest.approx((s3 * s3, 0.0, s3 * s3))
+    assert m.r_for(1.0, 4) == pytest.approx((25.0, 0.0, 25.0))  # the floor
+    assert m.r_for(None, 4) == (9.0, 0.0, 9.0)  # no CEP: the fallback
+    assert m.r_for(0.0, 4) == (9.0, 0.0, 9.0)
+
+
+# --- robust weights -------------------------------------------------------------------------
+def test_student_t_weight_hand_cases() -> None:
+    w = StudentTWeight(dof=4.0)
+    assert w.weight(3.0, 3) == pytest.approx(1.0)  # a typical innovation keeps its R
+    assert w.weight(17.0, 3) == pytest.approx(7.0 / 21.0)  # (nu + m) / (nu + NIS)
+    assert w.weight(0.0, 2) == pytest.approx(1.0)  # capped at 1
+    assert w.weight(100.0, 2) < w.weight(10.0, 2) < 1.0  # monotone: outliers count less
+
+
+def test_huber_weight_hand_cases() -> None:
+    w = HuberWeight(k=1.5)
+    assert w.weight(1.5**2, 3) == 1.0
+    assert w.weight(3.0**2, 3) == pytest.approx(0.5)  # k / d
+    assert w.weight(0.0, 2) == 1.0
+
+
+# --- transition matrix, M-of-N, deleter ---------------------------------------------------
+def test_transition_matrix_validation() -> None:
+    good = validate_transition([[0.9, 0.1], [0.2, 0.8]], 2, "f.yaml: motion.imm.transition")
+    assert good == ((0.9, 0.1), (0.2, 0.8))
+    with pytest.raises(ValueError, match=r"f\.yaml: motion\.imm\.transition: row 1 sums to 0\.9"):
+        validate_transition([[0.9, 0.1], [0.2, 0.7]], 2, "f.yaml: motion.imm.transition")
+    with pytest.raises(ValueError, match="entries must lie in"):
+        validate_transition([[1.1, -0.1], [0.2, 0.8]], 2, "x")
+    with pytest.raises(ValueError, match="must be 2x2"):
+        validate_transition([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], 2, "x")
+
+
+def test_m_of_n() -> None:
+    m = MofN(3, 5)  # the start is a hit
+    assert m.record(False) == "pending"
+    assert m.record(True) == "pending"
+    assert m.record(True) == "confirmed"
+    m = MofN(3, 5)
+    assert m.record(False) == "pending"
+    assert m.record(False) == "pending"
+    assert m.record(False) == "failed"  # 1 hit + 1 test left < 3
+    with pytest.raises(ValueError):
+        MofN(4, 3)
+
+
+def test_deleter() -> None:
+    d = Deleter(max_coast_s=10.0, max_consecutive_rejections=3)
+    assert not d.coast_expired(19.9, 10.0)
+    assert d.coast_expired(20.1, 10.0)
+    assert not d.too_many_rejections(2)
+    assert d.too_many_rejections(3)
+    never = Deleter(None, None)
+    assert not never.coast_expired(1e9, 0.0) and not never.too_many_rejections(10**6)
+
+
+# --- filters against the references ---------------------------------------------------------
+def _stream(seed: int, n: int) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    out = []
+    t = 0.0
+    for k in range(n):
+        t += float(rng.uniform(0.1, 2.0))
+        if k % 4 == 3:
+            R = np.array([[120.0, 20.0], [20.0, 80.0]])
+            z = np.array([0.5 * t * t, 3.0 * t]) + rng.normal(0, 10.0, 2)
+        else:
+            R = np.array([[30.0, 2.0, -1.0], [2.0, 50.0, 4.0], [-1.0, 4.0, 60.0]])
+            z = np.array([0.5 * t * t, 3.0 * t, 40.0]) + rng.normal(0, 6.0, 3)
+        out.append((t, z, R))
+    return out
+
+
+def test_cv_filter_matches_the_matrix_reference() -> None:
+    q = (1.5, 2.5, 0.7)
+    f = CvFilter(q)
+    x0 = np.array([0.0, 0.0, 40.0, 0.0, 0.0, 0.0])
+    P0 = np.diag([30.0, 50.0, 60.0, 100.0, 100.0, 100.0])
+    f.set_state(x0, P0)
+    x, P = x0.copy(), P0.copy()
+    t0 = 0.0
+    for t, z, R in _stream(1, 60):
+        f.predict(t - t0)
+        x, P = kf_predict(x, P, t - t0, q)
+        t0 = t
+        nis_ours = f.update(z.tolist(), pack_r(R))
+        x, P, nis = kf_update_joseph(x, P, z, R)
+        xo, Po = packed_arrays(*f.mean())
+        np.testing.assert_allclose(xo, x, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(Po, P, rtol=1e-9, atol=1e-9)
+        assert nis_ours == pytest.approx(nis, rel=1e-9)
+
+
+def _filterpy_mode(q: tuple[float, float, float], x0: np.ndarray, P0: np.ndarray) -> KalmanFilter:
+    kf = KalmanFilter(dim_x=6, dim_z=3)
+    kf.x = x0.copy()
+    kf.P = P0.copy()
+    return kf
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_imm_matches_filterpy_imm_estimator(seed: int) -> None:
+    qs = [(0.3, 0.3, 0.1), (15.0, 15.0, 4.0)]
+    M = [[0.95, 0.05], [0.1, 0.9]]
+    mu0 = [0.6, 0.4]
+    x0 = np.array([0.0, 0.0, 40.0, 0.0, 0.0, 0.0])
+    P0 = np.diag([30.0, 50.0, 60.0, 100.0, 100.0, 100.0])
+    ours = ImmFilter(qs, M, mu0)
+    ours.set_state(x0, P0)
+    modes = [_filterpy_mode(q, x0, P0) for q in qs]
+    ref = IMMEstimator(modes, np.array(mu0), np.array(M))
+    t0 = 0.0
+    for t, z, R in _stream(seed, 50):
+        if z.shape[0] == 2:
+            continue  # filterpy's IMM needs one measurement dimension for all its filters
+        T = t - t0
+        t0 = t
+        for m, q in zip(modes, qs, strict=True):
+            m.F = cv_transition(T)
+            m.Q = cv_process_noise(T, q)
+            m.H = position_h(3)
+            m.R = R
+        ref.predict()
+        ours.predict(T)
+        ref.update(z)
+        ours.update(z.tolist(), pack_r(R))
+        np.testing.assert_allclose(ours.mode_probabilities(), ref.mu, rtol=1e-9, atol=1e-12)
+        xo, Po = packed_arrays(*ours.mean())
+        np.testing.assert_allclose(xo, ref.x, rtol=1e-9, atol=1e-8)
+        np.testing.assert_allclose(Po, ref.P, rtol=1e-8, atol=1e-8)
+        for mine, theirs in zip(ours.modes, modes, strict=True):
+            np.testing.assert_allclose(mine.x, theirs.x, rtol=1e-9, atol=1e-8)
+
+
+def test_imm_comparison_detects_a_wrong_transition_matrix() -> None:
+    qs = [(0.3, 0.3, 0.1), (15.0, 15.0, 4.0)]
+    x0 = np.array([0.0, 0.0, 40.0, 0.0, 0.0, 0.0])
+    P0 = np.diag([30.0, 50.0, 60.0, 100.0, 100.0, 100.0])
+    a = ImmFilter(qs, [[0.95, 0.05], [0.1, 0.9]], [0.5, 0.5])
+    b = ImmFilter(qs, [[0.94, 0.06], [0.1, 0.9]], [0.5, 0.5])
+    for f in (a, b):
+        f.set_state(x0, P0)
+    t0 = 0.0
+    for t, z, R in _stream(5, 20):
+        for f in (a, b):
+            f.predict(t - t0)
+            f.update(z.tolist(), pack_r(R))
+        t0 = t
+    assert not np.allclose(a.mode_probabilities(), b.mode_probabilities(), rtol=1e-6)
+
+
+def test_imm_predict_to_leaves_the_filter_alone_and_zero_time_is_no_step() -> None:
+    f = ImmFilter([(0.3, 0.3, 0.1), (15.0, 15.0, 4.0)], [[0.9, 0.1], [0.1, 0.9]], [0.5, 0.5])
+    f.set_state(np.array([0, 0, 40, 5, 0, 0], float), np.eye(6) * 10.0)
+    before = (list(f.mean()[0]), list(f.mean()[1]), f.mode_probabilities())
+    c = f.copy()
+    c.predict(3.0)
+    assert (list(f.mean()[0]), list(f.mean()[1]), f.mode_probabilities()) == before
+    assert c.mean()[0][0] == pytest.approx(15.0)
+    f.predict(0.0)
+    assert f.mode_probabilities() == before[2]

@@ -1,0 +1,258 @@
+"""Every radar object, and how UAV-like it is: the evidence behind track-level association.
+
+The radar's onboard tracker gives each report a track id. :class:`ObjectTable` keeps one
+:class:`RadarObject` per id for the whole flight (its own small CV filter, so multi-target
+tracking is an extension, not a rewrite) and a *UAV score* per object, a sum of log-odds-like
+terms from independent cues (no single cue decides; the radar's classifier errs both ways):
+
+* class history: exponential moving average (time constant ``class_tau_s``) of the logit of
+  the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``;
+* kinematics: an object more than ``below_ground_m`` below the ground (ENU up 0) is a
+  multipath ghost (``-below_ground_weight``); one older than ``stationary_min_age_s`` whose
+  mean speed stays below ``stationary_speed_mps`` is clutter (``-stationary_weight``); one
+  that moves but stays below ``ground_alt_m`` is a ground vehicle (``-ground_weight``); one
+  whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
+  ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
+  bird (``-erratic_weight``);
+* RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
+  horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
+  capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
+  evidence of a UAV);
+* agreement with the fused track: moving average of "this object's report had an NIS of at
+  most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
+  the track's R allows for correlated errors), times ``fused_weight``;
+* age: ``age_weight * min(1, age / age_full_s)`` (a track that persists is more likely real).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from uav_fusion.core.estimator.components import RadarRModel
+from uav_fusion.core.estimator.kalman import CvKalman, PackedR
+from uav_fusion.core.records import RadarTrack
+
+RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
+
+
+@dataclass(frozen=True)
+class ScoreConfig:
+    """Weights and thresholds of the UAV score (``association`` keys of a profile)."""
+
+    class_weight: float = 1.0
+    class_tau_s: float = 8.0
+    class_clip: float = 3.0
+    stationary_speed_mps: float = 1.5
+    stationary_min_age_s: float = 8.0
+    stationary_weight: float = 5.0
+    ground_alt_m: float = 4.0
+    ground_weight: float = 3.0
+    below_ground_m: float = 5.0
+    below_ground_weight: float = 8.0
+    erratic_nis: float = 6.0
+    bird_rcs_dbsm: float = -15.0
+    erratic_weight: float = 2.0
+    rf_weight: float = 1.0
+    rf_tau_s: float = 30.0
+    rf_max: float = 3.0
+    rf_window_s: float = 3.0
+    fused_weight: float = 1.5
+    fused_tau_s: float = 10.0
+    fused_nis: float = 3.0
+    age_weight: float = 0.5
+    age_full_s: float = 10.0
+    object_q: float = 5.0
+    object_floor_m: float = 10.0
+    speed_tau_s: float = 5.0
+    follow_min: float = 0.0
+    init_min: float = 1.0
+    init_min_reports: int = 4
+
+
+
+def score_keys() -> tuple[str, ...]:
+    """The profile keys of :class:`ScoreConfig` (``association.<key>``)."""
+    return tuple(f.name for f in fields(ScoreConfig))
+
+
+def _ema(old: float, new: float, dt: float, tau: float) -> float:
+    if tau <= 0:
+        return new
+    a = math.exp(-dt / tau) if dt > 0 else 1.0
+    return a * old + (1.0 - a) * new
+
+
+class RadarObject:
+    """One radar track id: its own CV filter and the running evidence of the UAV score."""
+
+    __slots__ = (
+        "class_logit",
+        "first_t",
+        "fused",
+        "fused_t",
+        "id",
+        "kf",
+        "last_t",
+        "n_reports",
+        "nis_mean",
+        "rcs_mean",
+        "rf_support",
+        "rf_t",
+        "speed",
+        "up",
+    )
+
+    def __init__(self, track_id: int, t: float) -> None:
+        self.id = track_id
+        self.first_t = t
+        self.last_t = t
+        self.n_reports = 0
+        self.kf: CvKalman | None = None
+        self.class_logit = 0.0
+        self.speed = 0.0
+        self.up = 0.0
+        self.nis_mean = 3.0
+        self.rcs_mean = 0.0
+        self.rf_support = 0.0
+        self.rf_t = t
+        self.fused = 0.0
+        self.fused_t: float | None = None
+
+    @property
+    def age_s(self) -> float:
+        return self.last_t - self.first_t
+
+    def rf_support_at(self, t: float, tau: float) -> float:
+        if self.rf_support == 0.0:
+            return 0.0
+        return self.rf_support * math.exp(-(t - self.rf_t) / tau) if tau > 0 else 0.0
+
+    def score(self, cfg: ScoreConfig) -> float:
+        """The UAV score at the object's last report (see the module text)."""
+        s = cfg.class_weight * self.class_logit
+        age = self.age_s
+        if self.up < -cfg.below_ground_m:  # nothing real flies below the ground: multipath
+            s -= cfg.below_ground_weight
+        elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
+            s -= cfg.stationary_weight
+        elif self.up < cfg.ground_alt_m and self.n_reports > 1:
+            s -= cfg.ground_weight
+        if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
+            s -= cfg.erratic_weight
+        s += cfg.rf_weight * min(cfg.rf_max, self.rf_support_at(self.last_t, cfg.rf_tau_s))
+        s += cfg.fused_weight * self.fused
+        if cfg.age_full_s > 0:
+            s += cfg.age_weight * min(1.0, age / cfg.age_full_s)
+        return s
+
+
+class ObjectTable:
+    """Every radar object of a flight, updated by every report of every frame."""
+
+    def __init__(self, cfg: ScoreConfig, radar_r: RadarRModel) -> None:
+        self.cfg = cfg
+        self.radar_r = radar_r
+        self.objects: dict[int, RadarObject] = {}
+
+    def update(self, trk: RadarTrack, r: PackedR | None = None) -> RadarObject:
+        """Fold one report (with its R, computed here when not given) into its object
+        (created on first sight)."""
+        cfg = self.cfg
+        obj = self.objects.get(trk.track_id)
+        t = trk.t
+        if obj is None:
+            obj = self.objects[trk.track_id] = RadarObject(trk.track_id, t)
+        dt = t - obj.last_t
+        if r is None:
+            r = self.radar_r.r_at(trk.e, trk.n, trk.u)
+        kf = obj.kf
+        fresh = kf is None or dt < 0
+        if fresh:
+            kf = obj.kf = CvKalman((cfg.object_q, cfg.object_q, cfg.object_q))
+            kf.x = [trk.e, trk.n, trk.u, 0.0, 0.0, 0.0]
+            v = 100.0
+            kf.P = [
+                r[0], r[1], r[2], 0.0, 0.0, 0.0,
+                r[3], r[4], 0.0, 0.0, 0.0,
+                r[5], 0.0, 0.0, 0.0,
+                v, 0.0, 0.0,
+                v, 0.0,
+                v,
+            ]  # fmt: skip
+            dt = 0.0
+            obj.up = trk.u
+            obj.rcs_mean = trk.rcs_dbsm if trk.rcs_dbsm is not None else 0.0
+        # one smoothing factor per time constant for this interval (the EMAs below)
+        tau = cfg.speed_tau_s
+        a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
+        b = 1.0 - a
+        assert kf is not None
+        if not fresh:
+            kf.predict(dt)
+            nis = kf.update3(trk.e, trk.n, trk.u, r)
+            if math.isfinite(nis):
+                obj.nis_mean = a * obj.nis_mean + b * min(nis, 100.0)
+        vel = trk.vel_ned
+        if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
+            vn, ve, vd = vel
+            spd = math.sqrt(vn * vn + ve * ve + vd * vd)
+        else:
+            x = kf.x
+            spd = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+        if obj.n_reports == 0:
+            obj.speed = spd
+        else:
+            obj.speed = a * obj.speed + b * spd
+            obj.up = a * obj.up + b * trk.u
+            rcs = trk.rcs_dbsm
+            if rcs is not None and math.isfinite(rcs):
+                obj.rcs_mean = a * obj.rcs_mean + b * rcs
+        p = trk.uav_prob
+        if p is not None and math.isfinite(p):
+            c = cfg.class_clip
+            pc = min(max(p, 1e-6), 1.0 - 1e-6)
+            lg = max(-c, min(c, math.log(pc / (1.0 - pc))))
+            obj.class_logit = (
+                lg if obj.n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
+            )
+        obj.n_reports += 1
+        obj.last_t = t
+        return obj
+
+    def mark_fused(self, obj: RadarObject, inside: bool, t: float) -> None:
+        """Record whether the object's report at ``t`` fell inside the UAV track's gate."""
+        v = 1.0 if inside else 0.0
+        if obj.fused_t is None:
+            obj.fused = v
+        else:
+            obj.fused = _ema(obj.fused, v, t - obj.fused_t, self.cfg.fused_tau_s)
+        obj.fused_t = t
+
+    def rf_fix(self, t: float, e: float, n: float, var_m2: float) -> int:
+        """Credit every recent object whose predicted position agrees with an RF fix; returns
+        the number of objects credited."""
+        cfg = self.cfg
+        hits = 0
+        for obj in self.objects.values():
+            dt = t - obj.last_t
+            kf = obj.kf
+            if kf is None or abs(dt) > cfg.rf_window_s:
+                continue
+            x = kf.x
+            p = kf.P
+            de = e - (x[0] + dt * x[3])
+            dn = n - (x[1] + dt * x[4])
+            # object position variance (horizontal, with the velocity's share over dt)
+            s00 = p[0] + 2 * dt * p[3] + dt * dt * p[15] + var_m2
+            s11 = p[6] + 2 * dt * p[9] + dt * dt * p[18] + var_m2
+            s01 = p[1] + dt * (p[4] + p[8]) + dt * dt * p[16]
+            det = s00 * s11 - s01 * s01
+            if det <= 0:
+                continue
+            d2 = (s11 * de * de - 2.0 * s01 * de * dn + s00 * dn * dn) / det
+            if d2 <= RF_GATE_99_2DOF:
+                obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
+                obj.rf_t = t
+                hits += 1
+        return hits

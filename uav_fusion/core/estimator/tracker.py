@@ -1,0 +1,664 @@
+"""The tracker: every radar report of every frame is a candidate; one UAV track is kept.
+
+Components come from the profile: a motion filter (CV or IMM,
+:mod:`~uav_fusion.core.estimator.filters`), measurement models that own their R (fixed, polar
+radar, CEP-based RF), a robust weight (none, Student-t, Huber), the NIS gate, M-of-N
+initiation and a deleter (:mod:`~uav_fusion.core.estimator.components`), and the radar object
+table with its UAV score (:mod:`~uav_fusion.core.estimator.association`).
+
+Per radar frame (all reports share one time):
+
+1. every finite report updates its radar object (its own filter and score), whatever else
+   happens to it; non-finite reports are discarded (``invalid``);
+2. with a track: the deleter may drop it (``max_coast``); otherwise it is predicted to the
+   frame's time once;
+3. reports beyond the range gate are discarded (``range_gate``);
+4. confirmed track: a report is *eligible* when its object's score is at least
+   ``follow_min``; of the eligible reports inside the NIS gate the one with the smallest
+   ``NIS - 2 score`` (global nearest neighbour with the score as prior log-odds) updates the
+   track with ``R / w`` (``w`` the robust weight); the others are ``not_selected``. When no
+   eligible report is inside the gate, the most UAV-like eligible report makes the frame's
+   ``coasted`` step (a rejection); ineligible reports are discarded (``score``);
+5. no confirmed track: the object with the highest score that reaches ``init_min`` with at
+   least ``init_min_reports`` reports starts a confirmed track from its own filter's state
+   (position and velocity); a tentative RF track is confirmed by an eligible report inside
+   its gate or superseded by such an object.
+
+An RF fix (``ok`` attempts only) credits every radar object it agrees with, then is gated
+and fused with its CEP-based R (or coasts); without any track it starts a tentative track
+that needs M of N hits (NIS gate and speed bound) to be confirmed, as in the paper profile.
+
+Every report and fix yields exactly one :class:`TrackerStep` (a :class:`Step` that also
+carries its measurement ``z``, the object score and the robust weight), with the statuses of
+:mod:`~uav_fusion.core.estimator.track`, so Table II and every consumer of steps work
+unchanged.
+
+Fixed-rate output needs only :attr:`confirmed`, :attr:`last_update_t`, :meth:`best_track`
+and :meth:`predict_to` (which predicts a copy of the filter: the track is not changed).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, replace
+
+import numpy as np
+import numpy.typing as npt
+
+from uav_fusion.core.estimator.association import ObjectTable, RadarObject
+from uav_fusion.core.estimator.components import (
+    CepRfR,
+    Deleter,
+    FixedRadarR,
+    FixedRfR,
+    HuberWeight,
+    MofN,
+    NoRobust,
+    PolarRadarR,
+    RadarRModel,
+    RfRModel,
+    RobustWeight,
+    StudentTWeight,
+    scale_packed,
+)
+from uav_fusion.core.estimator.filters import CvFilter, ImmFilter, MotionFilter
+from uav_fusion.core.estimator.kalman import PackedR, expand_upper, pack_r
+from uav_fusion.core.estimator.profile import Profile
+from uav_fusion.core.estimator.track import (
+    COASTED,
+    DISCARDED,
+    INITIALISED,
+    RESET,
+    TENTATIVE,
+    UPDATED,
+    Step,
+    nis_gate,
+)
+from uav_fusion.core.records import RADAR, RF, RadarFrame, RadarTrack, RfAttempt
+from uav_fusion.core.site import Site
+
+FloatArray = npt.NDArray[np.float64]
+
+_pack = struct.Struct("27d").pack
+_NAN_STATE = _pack(*(math.nan,) * 27)
+
+
+class TrackerStep(Step):
+    """A :class:`Step` with the measurement, its object's UAV score, the robust weight, the
+    IMM mode probabilities and the track segment (a new one starts at every track start)."""
+
+    __slots__ = ("mode_probs", "q_eff", "score", "segment", "weight", "z")
+
+    def __init__(
+        self,
+        t: float,
+        source: str,
+        status: str,
+        reason: str | None,
+        nis: float | None,
+        state: bytes,
+        dim: int,
+        track_id: int | None,
+        seq: int,
+        z: tuple[float, ...],
+        score: float | None,
+        weight: float | None,
+        mode_probs: tuple[float, ...],
+        segment: int,
+        q_eff: tuple[float, float, float],
+    ) -> None:
+        self.t = t
+        self.source = source
+        self.status = status
+        self.reason = reason
+        self.nis = nis
+        self._state = state
+        self._x = None
+        self._P = None
+        self.dim = dim
+        self.track_id = track_id
+        self.seq = seq
+        self.z = z
+        self.score = score
+        self.weight = weight
+        self.mode_probs = mode_probs
+        self.segment = segment
+        self.q_eff = q_eff
+
+    def with_state(self, state: bytes) -> TrackerStep:
+        """A copy with another packed state (x then the upper triangle of P)."""
+        return TrackerStep(
+            self.t,
+            self.source,
+            self.status,
+            self.reason,
+            self.nis,
+            state,
+            self.dim,
+            self.track_id,
+            self.seq,
+            self.z,
+            self.score,
+            self.weight,
+            self.mode_probs,
+            self.segment,
+            self.q_eff,
+        )
+
+
+@dataclass(frozen=True)
+class TrackEstimate:
+    """The tracker's UAV track at its last processed time."""
+
+    t: float
+    x: FloatArray
+    P: FloatArray
+    confirmed: bool
+    last_update_t: float | None
+    radar_object: int | None
+    mode_probs: tuple[float, ...]
+
+
+def radar_model_from_profile(profile: Profile, site: Site) -> RadarRModel:
+    if profile.radar_model == "polar":
+        return PolarRadarR(
+            tuple(float(v) for v in site.radar.enu),  # type: ignore[arg-type]
+            profile.radar_sigma_range_m,
+            math.radians(profile.radar_sigma_az_deg),
+            math.radians(profile.radar_sigma_el_deg),
+            profile.radar_floor_m,
+        )
+    return FixedRadarR(pack_r(profile.r_radar))
+
+
+def rf_model_from_profile(profile: Profile) -> RfRModel:
+    fixed = pack_r(profile.r_rf)
+    if profile.rf_model == "cep":
+        return CepRfR(
+            profile.rf_cep_scale,
+            profile.rf_floor_m,
+            profile.rf_ref_sensors,
+            profile.rf_sensor_exponent,
+            fixed,
+        )
+    return FixedRfR(fixed)
+
+
+def robust_from_profile(profile: Profile) -> RobustWeight:
+    if profile.robust == "student_t":
+        return StudentTWeight(profile.robust_dof)
+    if profile.robust == "huber":
+        return HuberWeight(profile.robust_huber_k)
+    return NoRobust()
+
+
+def motion_filter_from_profile(profile: Profile) -> MotionFilter:
+    if profile.motion_model == "imm":
+        return ImmFilter(profile.imm_q, profile.imm_transition, profile.imm_initial)
+    return CvFilter(profile.q)
+
+
+class Tracker:
+    """Radar + RF UAV tracker over all radar objects (see the module text)."""
+
+    def __init__(self, profile: Profile, site: Site) -> None:
+        self.profile = profile
+        self.site = site
+        self.cfg = profile.score
+        self.radar_r = radar_model_from_profile(profile, site)
+        self.rf_r = rf_model_from_profile(profile)
+        self.robust = robust_from_profile(profile)
+        r_obj = self.radar_r
+        self._extra_var = 0.0  # UAV-track R = object R + this on each diagonal element
+        if isinstance(r_obj, PolarRadarR):
+            # each object's own filter sees the per-report error (its erratic-motion cue
+            # would vanish under the UAV track's floor for correlated errors)
+            f_obj = min(r_obj.floor_m, self.cfg.object_floor_m)
+            self._extra_var = r_obj.floor_m**2 - f_obj**2
+            r_obj = replace(r_obj, floor_m=f_obj)
+        self._r_obj = r_obj
+        self.objects = ObjectTable(self.cfg, r_obj)
+        self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
+        self._g2 = nis_gate(profile.nis_probability, 2)
+        self._g3 = nis_gate(profile.nis_probability, 3)
+        gate = profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
+        self._gate2 = float(gate) ** 2
+        self._radar_pos = tuple(float(v) for v in site.radar.enu)
+        self.filter: MotionFilter | None = None
+        self.t: float | None = None
+        self.last_update_t: float | None = None
+        self.confirmed = False
+        self.followed: int | None = None  # radar object id of the last radar update
+        self.last_3d_t: float | None = None  # time of the last radar update
+        self.consecutive_rejections = 0
+        self.segment = -1
+        self._mofn: MofN | None = None
+        self._last_hit = (0.0, 0.0, 0.0)
+        self._pending_reset: str | None = None
+        self._seq = 0
+        self.counters: dict[str, int] = {}
+
+    # --- fixed-rate accessors -----------------------------------------------------------
+    @property
+    def active(self) -> bool:
+        return self.filter is not None
+
+    def best_track(self) -> TrackEstimate | None:
+        """The confirmed UAV track at its last processed time, or None."""
+        f = self.filter
+        if f is None or not self.confirmed or self.t is None:
+            return None
+        x, p = f.mean()
+        return TrackEstimate(
+            self.t,
+            np.array(x, dtype=float),
+            expand_upper(p),
+            True,
+            self.last_update_t,
+            self.followed,
+            f.mode_probabilities(),
+        )
+
+    def predict_to(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """The track predicted to ``t`` (IMM: the combined estimate of the mixed
+        prediction) without changing the filter. Raises ValueError without a track or for
+        ``t`` before the track's time."""
+        f = self.filter
+        if f is None or self.t is None:
+            raise ValueError("predict_to: no track")
+        dt = t - self.t
+        if dt < 0:
+            raise ValueError(f"predict_to: {t} is before the track's time {self.t}")
+        c = f.copy()
+        c.predict(dt)
+        x, p = c.mean()
+        return np.array(x, dtype=float), expand_upper(p)
+
+    # --- bookkeeping --------------------------------------------------------------------
+    def _count(self, key: str, n: int = 1) -> None:
+        c = self.counters
+        c[key] = c.get(key, 0) + n
+
+    def _step(
+        self,
+        t: float,
+        source: str,
+        status: str,
+        reason: str | None,
+        nis: float | None,
+        z: tuple[float, ...],
+        track_id: int | None,
+        score: float | None = None,
+        weight: float | None = None,
+    ) -> TrackerStep:
+        f = self.filter
+        if f is not None:
+            x, p = f.mean()
+            state = _pack(*x, *p)
+            probs = f.mode_probabilities()
+            q = f.effective_q()
+        else:
+            state = _NAN_STATE
+            probs = ()
+            q = (0.0, 0.0, 0.0)
+        seq = self._seq
+        self._seq += 1
+        if status == DISCARDED:
+            self._count(DISCARDED)
+            self._count(f"rejected_{reason}")
+        return TrackerStep(
+            t, source, status, reason, nis, state, len(z), track_id, seq, z, score, weight,
+            probs, self.segment, q,
+        )  # fmt: skip
+
+    def _drop(self, reason: str) -> None:
+        if self.filter is not None:
+            if self.confirmed:
+                self._count(f"reinit_{reason}")
+                self._count("reinitialisations")
+                self._pending_reset = reason
+            else:
+                self._count("tentative_dropped")
+        self.filter = None
+        self.confirmed = False
+        self._mofn = None
+        self.consecutive_rejections = 0
+        self.followed = None
+
+    def _advance(self, t: float) -> bool:
+        """Deleter check and prediction to ``t``; False when ``t`` is before the track."""
+        if self.filter is None or self.t is None:
+            return True
+        dt = t - self.t
+        if dt < 0:
+            return False
+        if self.deleter.coast_expired(t, self.last_update_t):
+            self._drop("max_coast")
+            return True
+        self.filter.predict(dt)
+        self.t = t
+        return True
+
+    def _start(
+        self,
+        t: float,
+        x: list[float],
+        P: FloatArray,
+        tentative: bool,
+    ) -> None:
+        f = motion_filter_from_profile(self.profile)
+        f.set_state(x, P)
+        self.filter = f
+        self.t = t
+        self.last_update_t = t
+        self.consecutive_rejections = 0
+        self.confirmed = not tentative
+        self.segment += 1
+        self.last_3d_t = None
+
+    def _confirmed_status(self) -> tuple[str, str | None]:
+        reason = self._pending_reset
+        self._pending_reset = None
+        status = INITIALISED if reason is None else RESET
+        self._count(status)
+        return status, reason
+
+    # --- radar --------------------------------------------------------------------------
+    def process_radar_frame(self, frame: RadarFrame) -> list[TrackerStep]:
+        """One radar frame; returns one step per report, in the frame's order."""
+        t = frame.t
+        c = self.counters
+        out: list[TrackerStep | None] = [None] * len(frame.tracks)
+        objs: list[tuple[int, RadarTrack, RadarObject, PackedR]] = []
+        r_at = self._r_obj.r_at
+        dv = self._extra_var
+        for i, trk in enumerate(frame.tracks):
+            c["measurements"] = c.get("measurements", 0) + 1
+            c["radar_measurements"] = c.get("radar_measurements", 0) + 1
+            z = (trk.e, trk.n, trk.u)
+            if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
+                out[i] = self._step(t, RADAR, DISCARDED, "invalid", None, z, trk.track_id)
+                continue
+            ro = r_at(trk.e, trk.n, trk.u)
+            r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
+            objs.append((i, trk, self.objects.update(trk, ro), r))
+        if not self._advance(t):
+            for i, trk, _, _ in objs:
+                z = (trk.e, trk.n, trk.u)
+                out[i] = self._step(t, RADAR, DISCARDED, "out_of_order", None, z, trk.track_id)
+            return [s for s in out if s is not None]
+        cands: list[tuple[int, RadarTrack, RadarObject, float]] = []
+        rs: dict[int, PackedR] = {}
+        rx, ry, rz = self._radar_pos
+        for i, trk, obj, r in objs:
+            rs[i] = r
+            d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
+            if d2 > self._gate2:
+                z = (trk.e, trk.n, trk.u)
+                out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, z, trk.track_id)
+            else:
+                cands.append((i, trk, obj, obj.score(self.cfg)))
+        if cands:
+            for i, step in self._radar_candidates(t, cands, rs):
+                out[i] = step
+        return [s for s in out if s is not None]
+
+    def _radar_candidates(
+        self,
+        t: float,
+        cands: list[tuple[int, RadarTrack, RadarObject, float]],
+        rs: dict[int, PackedR],
+    ) -> list[tuple[int, TrackerStep]]:
+        cfg = self.cfg
+        res: list[tuple[int, TrackerStep]] = []
+        f = self.filter
+        if f is not None:
+            g = self._g3
+            scored = []
+            for i, trk, obj, s in cands:
+                z = (trk.e, trk.n, trk.u)
+                r = rs[i]
+                nis = f.nis(z, r)
+                ok = nis <= g
+                if self.confirmed:
+                    self.objects.mark_fused(obj, nis <= cfg.fused_nis, t)
+                scored.append((i, trk, obj, s, z, r, nis, ok))
+            if not self.confirmed:
+                # a tentative RF track: only an object strong enough to start a track may
+                # confirm it (inside its gate) or supersede it (_initiate)
+                strong = [
+                    e
+                    for e in scored
+                    if e[7] and e[3] >= cfg.init_min and e[2].n_reports >= cfg.init_min_reports
+                ]
+                if strong:
+                    best = min(strong, key=lambda e: (e[6] - 2.0 * e[3], e[0]))
+                    i, trk, obj, s, z, r, nis, _ = best
+                    f.update(z, r)
+                    self.confirmed = True
+                    self._pending_reset = None
+                    self._count("confirmed")
+                    res.append((i, self._used(t, RADAR, nis, z, trk.track_id, s, 1.0)))
+                    self.followed = trk.track_id
+                    self.last_3d_t = t
+                    for e in scored:
+                        if e is not best:
+                            res.append((e[0], self._discard_report(t, e, "not_selected")))
+                    return res
+                return self._initiate(t, cands)
+            eligible = [e for e in scored if e[3] >= cfg.follow_min]
+            in_gate = [e for e in eligible if e[7]]
+            if in_gate:
+                best = min(in_gate, key=lambda e: (e[6] - 2.0 * e[3], e[0]))
+                i, trk, obj, s, z, r, nis, _ = best
+                w = self.robust.weight(nis, 3)
+                f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
+                res.append((i, self._used(t, RADAR, nis, z, trk.track_id, s, w)))
+                self.followed = trk.track_id
+                self.last_3d_t = t
+                for e in scored:
+                    if e is not best:
+                        why = "not_selected" if e[3] >= cfg.follow_min else "score"
+                        res.append((e[0], self._discard_report(t, e, why)))
+                return res
+            # nothing usable inside the gate: a rejection of the track only when the object
+            # it follows, or one strong enough to start a track, disagrees with it
+            contra = [
+                e
+                for e in eligible
+                if e[1].track_id == self.followed
+                or (e[3] >= cfg.init_min and e[2].n_reports >= cfg.init_min_reports)
+            ]
+            if contra:
+                best = max(contra, key=lambda e: (e[3], -e[0]))
+                i, trk, obj, s, z, r, nis, _ = best
+                if self.deleter.too_many_rejections(self.consecutive_rejections + 1):
+                    # this rejection drops the track: the reports of the frame (the one that
+                    # disagreed included) may start the next one at once
+                    self._count("rejected_nis")
+                    self._drop("max_rejections")
+                    return self._initiate(t, cands)
+                res.append((i, self._rejected(t, RADAR, nis, z, trk.track_id, s)))
+                for e in scored:
+                    if e is best:
+                        continue
+                    why = "nis" if e[3] >= cfg.follow_min else "score"
+                    res.append((e[0], self._discard_report(t, e, why)))
+                return res
+            for e in scored:
+                why = "nis" if e[3] >= cfg.follow_min else "score"
+                res.append((e[0], self._discard_report(t, e, why)))
+            return res
+        # no confirmed track (none, or a tentative RF track): a strong object starts one
+        return self._initiate(t, cands)
+
+    def _discard_report(
+        self,
+        t: float,
+        e: tuple[int, RadarTrack, RadarObject, float, tuple[float, ...], PackedR, float, bool],
+        why: str,
+    ) -> TrackerStep:
+        return self._step(t, RADAR, DISCARDED, why, e[6], e[4], e[1].track_id, e[3])
+
+    def _initiate(
+        self, t: float, cands: list[tuple[int, RadarTrack, RadarObject, float]]
+    ) -> list[tuple[int, TrackerStep]]:
+        cfg = self.cfg
+        ok = [
+            e
+            for e in cands
+            if e[3] >= cfg.init_min and e[2].n_reports >= cfg.init_min_reports
+        ]
+        res: list[tuple[int, TrackerStep]] = []
+        best = max(ok, key=lambda e: (e[3], -e[0])) if ok else None
+        if best is not None and RADAR in self.profile.init_sources:
+            i, trk, obj, s = best
+            if self.filter is not None:  # a tentative RF track is superseded
+                self._count("reinit_superseded")
+                self.filter = None
+                self._pending_reset = "superseded"
+            kf = obj.kf
+            assert kf is not None
+            x = list(kf.x)
+            P = expand_upper(kf.P)
+            self._start(t, x, P, tentative=False)
+            self.last_update_t = t
+            self.followed = trk.track_id
+            self.last_3d_t = t
+            status, reason = self._confirmed_status()
+            self._count(f"{status}_{RADAR}")
+            z = (trk.e, trk.n, trk.u)
+            res.append((i, self._step(t, RADAR, status, reason, None, z, trk.track_id, s)))
+        for e in cands:
+            if e is best and res:
+                continue
+            why = "no_track" if self.filter is None or not self.confirmed else "not_selected"
+            if self.filter is not None and not self.confirmed:
+                why = "tentative_track"
+            z = (e[1].e, e[1].n, e[1].u)
+            res.append((e[0], self._step(t, RADAR, DISCARDED, why, None, z, e[1].track_id, e[3])))
+        return res
+
+    def _used(
+        self,
+        t: float,
+        source: str,
+        nis: float,
+        z: tuple[float, ...],
+        track_id: int | None,
+        score: float | None,
+        weight: float,
+    ) -> TrackerStep:
+        self._count(UPDATED)
+        self._count(f"updated_{source}")
+        self.consecutive_rejections = 0
+        self.last_update_t = t
+        return self._step(t, source, UPDATED, None, nis, z, track_id, score, weight)
+
+    def _rejected(
+        self,
+        t: float,
+        source: str,
+        nis: float,
+        z: tuple[float, ...],
+        track_id: int | None,
+        score: float | None,
+    ) -> TrackerStep:
+        self._count(COASTED)
+        self._count(f"coasted_{source}")
+        self._count("rejected_nis")
+        self.consecutive_rejections += 1
+        step = self._step(t, source, COASTED, "nis", nis, z, track_id, score)
+        if self.deleter.too_many_rejections(self.consecutive_rejections):
+            self._drop("max_rejections")
+        return step
+
+    # --- RF -----------------------------------------------------------------------------
+    def process_rf(self, a: RfAttempt) -> list[TrackerStep]:
+        """One RF attempt; a failed attempt (no position) gives no step."""
+        if not a.ok:
+            return []
+        t = a.t
+        z = (a.e, a.n)
+        self._count("measurements")
+        self._count("rf_measurements")
+        if not math.isfinite(t + a.e + a.n):
+            return [self._step(t, RF, DISCARDED, "invalid", None, z, None)]
+        max_cep = self.profile.rf_max_cep_m
+        if max_cep is not None and a.cep is not None and a.cep > max_cep:
+            return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
+        r = self.rf_r.r_for(a.cep, a.valid_sensors)
+        self.objects.rf_fix(t, a.e, a.n, 0.5 * (r[0] + r[2]))
+        if not self._advance(t):
+            return [self._step(t, RF, DISCARDED, "out_of_order", None, z, None)]
+        f = self.filter
+        if f is None:
+            if RF not in self.profile.init_sources:
+                return [self._step(t, RF, DISCARDED, "no_track", None, z, None)]
+            return [self._start_rf(t, z, r)]
+        if not self.confirmed:
+            return [self._tentative_test(t, z, r)]
+        hold = self.profile.vz_hold_after_s
+        if hold is not None and (self.last_3d_t is None or t - self.last_3d_t > hold):
+            # no 3D measurement for a while: the vertical velocity is unobservable from 2D
+            # fixes, hold it near zero instead of letting a stale climb rate run away
+            sd = self.profile.vz_hold_sigma_mps
+            f.update_scalar(5, 0.0, sd * sd)
+            self._count("vz_hold")
+        nis = f.nis(z, r)
+        if nis <= self._g2:
+            w = self.robust.weight(nis, 2)
+            f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
+            return [self._used(t, RF, nis, z, None, None, w)]
+        return [self._rejected(t, RF, nis, z, None, None)]
+
+    def _start_rf(self, t: float, z: tuple[float, ...], r: PackedR) -> TrackerStep:
+        p = self.profile
+        x = [z[0], z[1], p.rf_init_altitude_m, 0.0, 0.0, 0.0]
+        P = np.zeros((6, 6))
+        P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
+        P[2, 2] = p.rf_init_altitude_std_m**2
+        P[3, 3] = P[4, 4] = P[5, 5] = p.init_velocity_std_mps**2
+        tentative = RF in p.tentative_sources and p.confirm_m > 1
+        self._start(t, x, P, tentative=tentative)
+        if tentative:
+            self._mofn = MofN(p.confirm_m, p.confirm_n)
+            self._last_hit = (t, z[0], z[1])
+            self._count("tentative_started")
+            self._count("tentative_started_rf")
+            return self._step(t, RF, TENTATIVE, "start", None, z, None)
+        status, reason = self._confirmed_status()
+        self._count(f"{status}_{RF}")
+        return self._step(t, RF, status, reason, None, z, None)
+
+    def _tentative_test(self, t: float, z: tuple[float, ...], r: PackedR) -> TrackerStep:
+        f = self.filter
+        m = self._mofn
+        assert f is not None and m is not None
+        vmax = self.profile.max_speed_mps
+        t0, e0, n0 = self._last_hit
+        dist = math.hypot(z[0] - e0, z[1] - n0)
+        speed_ok = vmax is None or (dist <= vmax * (t - t0) if t > t0 else dist == 0.0)
+        nis = f.nis(z, r)
+        hit = speed_ok and nis <= self._g2
+        if hit:
+            f.update(z, r)
+            self._last_hit = (t, z[0], z[1])
+            self.last_update_t = t
+        state = m.record(hit)
+        if state == "confirmed":
+            self.confirmed = True
+            self._mofn = None
+            self._pending_reset = None
+            self._count("confirmed")
+            return self._used(t, RF, nis, z, None, None, 1.0)
+        if hit:
+            self._count("tentative_hits")
+            return self._step(t, RF, TENTATIVE, "hit", nis, z, None)
+        reason = "nis" if speed_ok else "speed"
+        self._count(f"tentative_miss_{reason}")
+        if state == "failed":
+            self._drop("unconfirmed")
+            return self._start_rf(t, z, r)
+        return self._step(t, RF, TENTATIVE, reason, nis, z, None)
