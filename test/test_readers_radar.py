@@ -273,3 +273,19 @@ def test_unreadable_optional_fields(tmp_path: Path, site: Site) -> None:
         1,
         "trackData[0] (id 9): velocityNed [1, 'x', 0] is not 3 finite numbers",
     )
+
+
+def test_numbers_beyond_the_digit_limit_and_deep_nesting_are_bad_json(
+    tmp_path: Path, site: Site
+) -> None:
+    # json.loads raises ValueError (not JSONDecodeError) for an integer of more than 4300
+    # digits, and RecursionError for deep nesting: both are one bad line, not a crash
+    good = '{"params":{"globalTime":1759866140.25},"trackData":[]}'
+    later = '{"params":{"globalTime":1759866141.25},"trackData":[]}'
+    p = tmp_path / "radar_data_x.json"
+    p.write_text("\n".join([good, "9" * 5000, "[" * 100000, later]) + "\n")
+    frames, rep = read_radar_jsonl(p, site)
+    assert [f.line for f in frames] == [1, 4]
+    assert rep.skipped == Counter({"bad_json": 2})
+    with pytest.raises(DataError, match=r":2: invalid JSON: a number with too many digits"):
+        read_radar_jsonl(p, site, strict=True)

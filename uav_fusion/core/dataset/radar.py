@@ -99,6 +99,12 @@ def read_radar_jsonl(
         except json.JSONDecodeError as exc:
             src.bad(line, "bad_json", f"invalid JSON: {exc.msg} at column {exc.colno}")
             continue
+        except ValueError:  # an integer longer than Python's 4300-digit limit
+            src.bad(line, "bad_json", "invalid JSON: a number with too many digits")
+            continue
+        except RecursionError:
+            src.bad(line, "bad_json", "invalid JSON: nested too deeply")
+            continue
         if not isinstance(obj, dict):
             src.bad(line, "not_object", f"a JSON {type(obj).__name__}, not an object")
             continue
