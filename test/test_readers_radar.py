@@ -273,3 +273,35 @@ def test_unreadable_optional_fields(tmp_path: Path, site: Site) -> None:
         1,
         "trackData[0] (id 9): velocityNed [1, 'x', 0] is not 3 finite numbers",
     )
+
+
+def test_numbers_beyond_the_digit_limit_and_deep_nesting_are_one_bad_line(
+    tmp_path: Path, site: Site
+) -> None:
+    # json.loads raised ValueError (not JSONDecodeError) for an integer of more than 4300
+    # digits, and raises RecursionError for deep nesting: each is one bad line, not a crash
+    good = '{"params":{"globalTime":1759866140.25},"trackData":[]}'
+    later = '{"params":{"globalTime":1759866141.25},"trackData":[]}'
+    p = tmp_path / "radar_data_x.json"
+    p.write_text("\n".join([good, "9" * 5000, "[" * 100000, later]) + "\n")
+    frames, rep = read_radar_jsonl(p, site)
+    assert [f.line for f in frames] == [1, 4]
+    assert rep.skipped == Counter({"not_object": 1, "bad_json": 1})
+    with pytest.raises(DataError, match=r":2: a JSON float, not an object"):
+        read_radar_jsonl(p, site, strict=True)
+
+
+def test_integers_beyond_the_float_range_are_not_finite(tmp_path: Path, site: Site) -> None:
+    big = "9" * 400
+    lines_ = [
+        '{"params":{"globalTime":1759866140.25},"trackData":['
+        f'{{"id":1,"lla":[35.73,-78.69,{big}]}},'
+        f'{{"id":2,"lla":[35.73,-78.69,120.0],"range":{big},"numInliers":-{big}}}]}}',
+        f'{{"params":{{"globalTime":{big}}},"trackData":[]}}',
+    ]
+    p = tmp_path / "radar_data_x.json"
+    p.write_text("\n".join(lines_) + "\n")
+    frames, rep = read_radar_jsonl(p, site)
+    assert [tr.track_id for tr in frames[0].tracks] == [2]
+    assert frames[0].tracks[0].range_m is None and frames[0].tracks[0].num_inliers is None
+    assert rep.skipped == Counter({"track_nonfinite": 1, "no_time": 1})

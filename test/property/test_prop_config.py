@@ -113,6 +113,7 @@ def _names(path: tuple[Any, ...]) -> set[str]:
     """The key names along a path (the changed key and the sections above it), and for a
     list item its 1-based number (give or take 3: earlier deletions shift the items)."""
     names = {str(k) for k in path if isinstance(k, str)}
+    names |= {n[:-1] for n in names if n.endswith("s")}  # 'waypoints' -> 'waypoint 3'
     for k in path:
         if isinstance(k, int):
             names |= {str(j + 1) for j in range(max(k - 3, 0), k + 4)}

@@ -301,6 +301,41 @@ def _files_source(files: list[Path]) -> _MessageSource:
     return source
 
 
+def _storage_counts(files: list[Path]) -> Counter[str] | None:
+    """Messages per topic as the storage files themselves count them, cheaply: the sqlite3
+    ``messages`` table, the MCAP summary statistics. None when a file has no usable count
+    (an MCAP without summary, a damaged file)."""
+    counts: Counter[str] = Counter()
+    try:
+        for f in files:
+            if f.suffix == ".db3":
+                con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+                try:
+                    rows = con.execute(
+                        "SELECT t.name, COUNT(*) FROM messages m JOIN topics t "
+                        "ON m.topic_id = t.id GROUP BY t.name"
+                    ).fetchall()
+                finally:
+                    con.close()
+                for name, n in rows:
+                    counts[str(name)] += int(n)
+            else:
+                from mcap.reader import make_reader
+
+                with f.open("rb") as fh:
+                    summary = make_reader(fh).get_summary()
+                if summary is None or summary.statistics is None:
+                    return None
+                for cid, n in summary.statistics.channel_message_counts.items():
+                    channel = summary.channels.get(cid)
+                    if channel is None:
+                        return None
+                    counts[channel.topic] += int(n)
+    except Exception:  # a damaged file: no cheap count
+        return None
+    return counts
+
+
 def _scan(source: _MessageSource) -> _Scan:
     scan = _Scan()
     try:
@@ -430,16 +465,34 @@ class BagReader:
                     f"{self.path}: {name} reader yields {scan.total} messages, "
                     f"metadata.yaml lists {meta.message_count if meta else '?'}"
                 )
+            if ok and name == "rosbags":
+                # rosbags reads the topics metadata.yaml lists: a topic missing there would be
+                # lost without a word; cross-check with what the storage files hold
+                held = _storage_counts(self.files)
+                if held is None:
+                    held = _scan(_files_source(self.files)).counts
+                if +held != +scan.counts:
+                    diff = ", ".join(
+                        f"{t}: {held.get(t, 0)} stored, {scan.counts.get(t, 0)} read"
+                        for t in sorted(set(held) | set(scan.counts))
+                        if held.get(t, 0) != scan.counts.get(t, 0)
+                    )
+                    self.warnings.append(
+                        f"{self.path}: metadata.yaml does not describe the storage files "
+                        f"({diff}); reading the storage files directly"
+                    )
+                    ok = False
             if best is None or scan.total > best[2].total:
                 best = (name, source, scan)
             if ok:
                 return name, source, scan
         assert best is not None
         if expected is not None and not _same_counts(best[2].counts, expected):
+            got = best[2].counts
             diff = ", ".join(
-                f"{t}: {best[2].counts.get(t, 0)} of {n}"
-                for t, n in sorted(expected.items())
-                if best[2].counts.get(t, 0) != n
+                f"{t}: {got.get(t, 0)} of {expected.get(t, 0)}"
+                for t in sorted(set(expected) | set(got))
+                if got.get(t, 0) != expected.get(t, 0)
             )
             self.warnings.append(
                 f"{self.path}: message counts differ from metadata.yaml ({diff}); "

@@ -37,6 +37,14 @@ GPS_UTC_LEAP_S = 18.0  # GPS − UTC since 2017-01-01
 H_MIN, H_MAX = -500.0, 10000.0  # plausible ellipsoidal heights of a track, metres
 
 
+def _parse_int(text: str) -> int | float:
+    """JSON integers as int, except those beyond the float range (over 300 digits), which
+    become ±inf so that every later float conversion and finiteness check holds."""
+    if len(text) <= 300:
+        return int(text)
+    return -math.inf if text.startswith("-") else math.inf
+
+
 def _is_num(v: Any) -> bool:
     """A JSON number (``bool`` is not one; JSON gives exactly int or float)."""
     return type(v) is float or type(v) is int
@@ -95,9 +103,12 @@ def read_radar_jsonl(
     frames: list[tuple[float, int, list[_Track]]] = []
     for line, text in src.lines:
         try:
-            obj = json.loads(text)
+            obj = json.loads(text, parse_int=_parse_int)
         except json.JSONDecodeError as exc:
             src.bad(line, "bad_json", f"invalid JSON: {exc.msg} at column {exc.colno}")
+            continue
+        except RecursionError:
+            src.bad(line, "bad_json", "invalid JSON: nested too deeply")
             continue
         if not isinstance(obj, dict):
             src.bad(line, "not_object", f"a JSON {type(obj).__name__}, not an object")
