@@ -35,6 +35,7 @@ test: $(DEV_STAMP)
 lint: $(DEV_STAMP)
 	$(VENV)/bin/ruff check uav_fusion test scripts
 	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 
 bench: $(DEV_STAMP)
 	ROS_DOMAIN_ID=$(DOMAIN) $(PY) scripts/bench_filter.py

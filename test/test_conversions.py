@@ -9,9 +9,9 @@ import pytest
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import NavSatStatus
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.records import RADAR, RF, Measurement, RfAttempt, TruthFix
 from uav_fusion.core.site import load_site
+from uav_fusion.ros import conversions as cv
 
 T0 = 1759866140.123456789  # a UTC time on the day of the real flights
 

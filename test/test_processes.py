@@ -23,11 +23,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import NavSatFix
 from test_graph_flight import write_flight
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator import load_profile, run_flight
 from uav_fusion.core.site import load_site
-from uav_fusion.replay import stream_qos
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.qos import stream_qos
 
 pytestmark = pytest.mark.processes
 
@@ -145,7 +145,7 @@ def test_bad_parameter_exits_non_zero_with_a_message(tmp_path: Path) -> None:
 def test_a_stuck_middleware_teardown_cannot_keep_a_node_alive(tmp_path: Path) -> None:
     """run_node bounds the teardown: a node whose destruction hangs still exits, and says so."""
     code = (
-        "import time, uav_fusion.params as p\n"
+        "import time, uav_fusion.ros.params as p\n"
         "from rclpy.node import Node\n"
         "p.SHUTDOWN_GRACE_S = 1.0\n"
         "class Stuck(Node):\n"

@@ -27,8 +27,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 
-from uav_fusion import conversions as cv
-from uav_fusion.replay import stream_qos
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.qos import stream_qos
 
 pytestmark = pytest.mark.processes
 

@@ -25,11 +25,12 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from uav_fusion.bag.reader import BagReader, BagTopic, qos_reliability, qos_transient_local
 from uav_fusion.core.errors import ConfigError, UavFusionError
+from uav_fusion.ros.qos import CLOCK_QOS, make_qos
 
 
 def message_class(msgtype: str) -> Any:
@@ -153,7 +154,7 @@ class BagPlayer(Node):
                                  + (f" ({'; '.join(self.skipped.values())})" if self.skipped
                                     else ""))
         self._clock_pub = (
-            self.create_publisher(Clock, "/clock", QoSProfile(depth=10))
+            self.create_publisher(Clock, "/clock", CLOCK_QOS)
             if publish_clock else None
         )
         start = self.reader.start_ns + int(float(g("start_offset").value) * 1e9)
@@ -174,13 +175,10 @@ class BagPlayer(Node):
     @staticmethod
     def _qos(topic: BagTopic, reliability: str, depth: int) -> QoSProfile:
         rel = reliability or qos_reliability(topic.offered_qos) or "reliable"
-        return QoSProfile(
-            history=HistoryPolicy.KEEP_LAST,
+        return make_qos(
+            reliable=rel != "best_effort",
+            transient_local=qos_transient_local(topic.offered_qos),
             depth=depth,
-            reliability=ReliabilityPolicy.BEST_EFFORT if rel == "best_effort"
-            else ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL if qos_transient_local(topic.offered_qos)
-            else DurabilityPolicy.VOLATILE,
         )
 
     # -- control -----------------------------------------------------------------------------

@@ -30,12 +30,12 @@ import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from uav_fusion.bag.writer import BagWriter, WrittenBag
 from uav_fusion.core.errors import ConfigError, UavFusionError
 from uav_fusion.nodes.bag_player import message_class
+from uav_fusion.ros.qos import make_qos, qos_words
 
 #: Topics recorded by default (relative names follow the recorder's namespace; see
 #: docs/graph.md).
@@ -59,17 +59,6 @@ _GRAPH_TOPICS = {"/rosout", "/parameter_events"}
 
 def _desc(text: str, kind: int) -> ParameterDescriptor:
     return ParameterDescriptor(description=text, type=kind)
-
-
-def _qos_dict(q: QoSProfile) -> dict[str, Any]:
-    return {
-        "history": "keep_all" if q.history == HistoryPolicy.KEEP_ALL else "keep_last",
-        "depth": int(q.depth),
-        "reliability": "best_effort" if q.reliability == ReliabilityPolicy.BEST_EFFORT
-        else "reliable",
-        "durability": "transient_local" if q.durability == DurabilityPolicy.TRANSIENT_LOCAL
-        else "volatile",
-    }
 
 
 class BagRecorder(Node):
@@ -151,18 +140,14 @@ class BagRecorder(Node):
                 self._refuse(name, f"message type {msgtype} is not installed")
                 continue
             pubs = self.get_publishers_info_by_topic(name)
-            offered = [_qos_dict(i.qos_profile) for i in pubs]
+            offered = [qos_words(i.qos_profile) for i in pubs]
             rel = self.reliability or (
                 "best_effort" if offered and all(o["reliability"] == "best_effort"
                                                  for o in offered) else "reliable")
             durable = bool(offered) and all(o["durability"] == "transient_local" for o in offered)
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST if self.depth else HistoryPolicy.KEEP_ALL,
-                depth=self.depth or 1000,
-                reliability=ReliabilityPolicy.BEST_EFFORT if rel == "best_effort"
-                else ReliabilityPolicy.RELIABLE,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL if durable
-                else DurabilityPolicy.VOLATILE,
+            qos = make_qos(
+                reliable=rel != "best_effort", transient_local=durable,
+                depth=self.depth or 1000, keep_all=not self.depth,
             )
             try:
                 self.writer.add_topic(name, msgtype, qos=offered)

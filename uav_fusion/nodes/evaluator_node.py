@@ -44,12 +44,16 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
-from uav_fusion.conversions import (
+from uav_fusion.core.dataset import fmt_utc, load_flight
+from uav_fusion.core.errors import UavFusionError
+from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
+from uav_fusion.core.report import ReportFiles, write_report
+from uav_fusion.core.site import Site, load_site
+from uav_fusion.ros.conversions import (
     MessageError,
     is_failed_rf,
     msg_to_radar_measurement,
@@ -59,13 +63,9 @@ from uav_fusion.conversions import (
     time_from_stamp,
     time_to_ns,
 )
-from uav_fusion.core.dataset import fmt_utc, load_flight
-from uav_fusion.core.errors import UavFusionError
-from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
-from uav_fusion.core.report import ReportFiles, write_report
-from uav_fusion.core.site import Site, load_site
-from uav_fusion.nodes._diagnostics import make_status
-from uav_fusion.params import Param, declare_all, not_empty
+from uav_fusion.ros.diagnostics import make_status
+from uav_fusion.ros.params import Param, declare_all, not_empty
+from uav_fusion.ros.qos import stream_qos
 
 M = TypeVar("M")
 
@@ -168,9 +168,7 @@ class EvaluatorNode(Node):
         self._lock = threading.Lock()
         self.last_report: ReportFiles | None = None
 
-        qos = QoSProfile(
-            depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
-        )
+        qos = stream_qos(depth)
         self.create_subscription(NavSatFix, self.truth_topic, self._on_truth, qos)
         self.create_subscription(
             PoseWithCovarianceStamped, self.radar_raw_topic, self._on_radar_raw, qos

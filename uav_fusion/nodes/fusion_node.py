@@ -10,17 +10,10 @@ than that are dropped and counted (``late_<source>``). At the end of a stream th
 flushed by an idle timer (``idle_flush_s`` of wall time without input), by the
 ``fusion/flush`` service (std_srvs/Trigger) and on shutdown.
 
-Time faults: a stamp more than ``max_future_s`` ahead of the latest stamp seen (or of the
-simulated clock, if that is later) is held back until the next message of the same stream
-confirms the jump (a real gap in the data: both are then processed) or contradicts it (a
-lone bad stamp: dropped as ``<source>_future``), so one bad stamp cannot drag the reorder
-watermark ahead and make every later message "late". A backwards jump of the simulated clock
-by more than ``clock_jump_back_s`` (a bag loop) processes what is buffered, resets the filter
-and the reorder buffer, logs a warning and counts ``clock_jumps_back``; ``late_run_reset``
-messages in a row that are too late for the window or repeats do the same without a clock
-(counted as ``timeline_resets``). A message equal to
-one of the last ``DUPLICATE_MEMORY`` of its stream (same stamp, same position) is dropped as
-``<source>_duplicate`` (a restarted replay re-sends its file from the start).
+Time faults (duplicates, stamps far ahead, runs of late messages, the simulated clock jumping
+back) are handled by :class:`uav_fusion.core.timeline.Timeline` with this node's parameters
+``max_future_s``, ``late_run_reset`` and ``clock_jump_back_s``; it counts
+``<source>_duplicate``, ``<source>_future``, ``clock_jumps_back`` and ``timeline_resets``.
 
 Accounting: for each input stream, ``received_<s>`` = ``used_<s>`` + the sum of
 ``rejected_<s>_<reason>`` (refused by the estimator: gates, not selected, failed RF
@@ -54,19 +47,18 @@ from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.estimator import FusionEstimator, Profile, load_profile
 from uav_fusion.core.records import RADAR, RF, Measurement
 from uav_fusion.core.reorder import Batch, ReorderBuffer
 from uav_fusion.core.site import load_site
-from uav_fusion.nodes._diagnostics import make_status
-from uav_fusion.params import Param, declare_all, not_empty, run_node
-from uav_fusion.replay import stream_qos
+from uav_fusion.core.timeline import Timeline, TimelineConfig
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.diagnostics import make_status
+from uav_fusion.ros.params import Param, declare_all, not_empty, run_node
+from uav_fusion.ros.qos import stream_qos
 
 NODE_NAME = "fusion_node"
-#: How many recent messages per stream are remembered to recognise exact repeats.
-DUPLICATE_MEMORY = 4096
 
 
 def fusion_params() -> list[Param]:
@@ -136,19 +128,20 @@ class FusionNode(Node):
         self.frame = str(self.p["world_frame"] or self.site.frame_id)
         self.child_frame = str(self.p["child_frame_id"])
         self.estimator = FusionEstimator(self.profile, self.site)
-        self.buffer: ReorderBuffer[Measurement] = self._new_buffer()
         self.received: Counter[str] = Counter()
         self.used: Counter[str] = Counter()
         self.refused: Counter[str] = Counter()  # "<source>_<reason>"
-        self._held: dict[str, list[tuple[float, Measurement | None]]] = {RADAR: [], RF: []}
-        # recent (stamp, values) per stream, to drop exact repeats (a restarted replay)
-        self._seen: dict[str, set[tuple[float, ...]]] = {RADAR: set(), RF: set()}
-        self._seen_order: dict[str, deque[tuple[float, ...]]] = {RADAR: deque(), RF: deque()}
-        self._last_clock: float | None = None
-        self.clock_jumps_back = 0
-        self.timeline_resets = 0
-        self._late_run = 0
-        self.dropped: Counter[str] = Counter()
+        # message drops (malformed, refused by the estimator); the timeline counts its own
+        self._bad: Counter[str] = Counter()
+        self.timeline = Timeline(
+            TimelineConfig(
+                reorder_window_s=float(self.p["reorder_window_s"]),
+                max_future_s=float(self.p["max_future_s"]),
+                late_run_reset=int(self.p["late_run_reset"]),
+                clock_jump_back_s=float(self.p["clock_jump_back_s"]),
+            ),
+            self,
+        )
         self.statuses: Counter[str] = Counter()
         self.reasons: Counter[str] = Counter()
         self.nis: dict[str, list[float]] = {RADAR: [], RF: []}
@@ -183,8 +176,23 @@ class FusionNode(Node):
             f"'{self.profile.name}', reorder window {self.buffer.window_s:g} s"
         )
 
-    def _new_buffer(self) -> ReorderBuffer[Measurement]:
-        return ReorderBuffer(float(self.p["reorder_window_s"]), [RADAR, RF], grouped=[RADAR])
+    @property
+    def buffer(self) -> ReorderBuffer[Measurement]:
+        """The timeline's reorder buffer."""
+        return self.timeline.buffer
+
+    @property
+    def dropped(self) -> Counter[str]:
+        """Every drop by ``<source>_<reason>`` (and ``late_<source>``)."""
+        return self._bad + self.timeline.dropped
+
+    @property
+    def clock_jumps_back(self) -> int:
+        return self.timeline.clock_jumps_back
+
+    @property
+    def timeline_resets(self) -> int:
+        return self.timeline.timeline_resets
 
     # --- parameters -----------------------------------------------------------------------
     def _on_params(self, params: list[Any]) -> Any:
@@ -207,7 +215,7 @@ class FusionNode(Node):
         self._rates[source].append(now)
 
     def _on_radar(self, msg: PoseWithCovarianceStamped) -> None:
-        self._check_clock()
+        self.timeline.check_clock(self._sim_now())
         self._note_input(RADAR)
         try:
             m = cv.msg_to_radar_measurement(msg, self.frame, seq=self._next_seq())
@@ -216,10 +224,10 @@ class FusionNode(Node):
             return
         if not self.p["use_message_covariance"]:
             m.R = None
-        self._admit(RADAR, m.t, m)
+        self.timeline.admit(RADAR, m.t, m, self._sim_now())
 
     def _on_rf(self, msg: PointStamped) -> None:
-        self._check_clock()
+        self.timeline.check_clock(self._sim_now())
         self._note_input(RF)
         try:
             m = cv.msg_to_rf_measurement(msg, self.frame, seq=self._next_seq())
@@ -227,147 +235,32 @@ class FusionNode(Node):
             self._drop(RF, exc)
             return
         # None = a failed attempt: the RF stream moved on, nothing to fuse
-        self._admit(RF, cv.time_from_stamp(msg.header.stamp), m)
-        self._process(self.buffer.release(self._sim_now()))
+        clock = self._sim_now()
+        self.timeline.admit(RF, cv.time_from_stamp(msg.header.stamp), m, clock)
+        self.timeline.release(clock)
 
     def _drop(self, source: str, exc: cv.MessageError) -> None:
         self._count_drop(source, exc.reason, f"dropping bad {source} message(s): {exc}")
 
     def _count_drop(self, source: str, reason: str, warning: str, n: int = 1) -> None:
         key = f"{source}_{reason}"
-        if self.dropped[key] == 0:
+        if self._bad[key] == 0:
             self.get_logger().warning(warning)
-        self.dropped[key] += n
+        self._bad[key] += n
 
-    # --- stamps far ahead and clock jumps ---------------------------------------------------
-    def _admit(self, source: str, t: float, m: Measurement | None) -> None:
-        """Pass a stamp on unless it repeats a message or lies implausibly far ahead (see the
-        module docstring)."""
-        key = (t, *(m.z.tolist() if m is not None else ()))
-        seen = self._seen[source]
-        if key in seen:
-            self._count_drop(
-                source, "duplicate",
-                f"{source} message at {t:.3f} repeats one already received: dropped",
-            )
-            self._note_stale()
-            return
-        seen.add(key)
-        order = self._seen_order[source]
-        order.append(key)
-        if len(order) > DUPLICATE_MEMORY:
-            seen.discard(order.popleft())
-        horizon = float(self.p["max_future_s"])
-        clock = self._sim_now()
-        ref = self.buffer.watermark if clock is None else max(clock, self.buffer.watermark)
-        held = self._held[source]
-        if not math.isfinite(ref) or t <= ref + horizon:
-            if held:  # the stream continued on the old timeline: the held stamp was bad
-                self._drop_held(source)
-            self._enter(source, t, m)
-            return
-        what = (
-            f"{source} stamp {t:.3f} is {t - ref:.1f} s ahead of the latest stamp or "
-            f"simulated clock (max_future_s {horizon:g})"
-        )
-        if held and t == held[-1][0]:  # another report of the same held frame
-            held.append((t, m))
-            return
-        if held and held[-1][0] < t <= held[-1][0] + horizon:  # confirmed: the data jumped
-            self.get_logger().warning(
-                f"{what}, confirmed by the next message: following the jump"
-            )
-            for ht, hm in held:
-                self._enter(source, ht, hm)
-            held.clear()
-            self._enter(source, t, m)
-            return
-        if held:
-            self._drop_held(source)
-        held.append((t, m))
+    # --- timeline sink (uav_fusion.core.timeline) -------------------------------------------
+    def process(self, batches: Sequence[Batch[Measurement]]) -> None:
+        self._process(batches)
 
-    def _drop_held(self, source: str) -> None:
-        held = self._held[source]
-        t = held[0][0]
-        self._count_drop(
-            source, "future",
-            f"{source} stamp {t:.3f} lay far ahead of the stream and was not confirmed by the "
-            "next message: dropped",
-            n=len(held),
-        )
-        held.clear()
+    def failed_attempt(self, source: str, t: float) -> None:
+        self.refused[f"{source}_failed_attempt"] += 1
+        self.statuses["rf_failed_attempt"] += 1
 
-    def _enter(self, source: str, t: float, m: Measurement | None) -> None:
-        if m is None:
-            self.refused[f"{source}_failed_attempt"] += 1
-            self.statuses["rf_failed_attempt"] += 1
-            self.buffer.note(source, t)
-        else:
-            self._push(m)
+    def restart(self, reason: str) -> None:
+        self.estimator.restart_timeline(reason)
 
-    def _check_clock(self) -> None:
-        """Detect a backwards jump of the simulated clock (bag loop) and start over."""
-        now = self._sim_now()
-        if now is None:
-            return
-        last = self._last_clock
-        self._last_clock = now
-        if last is None or last - now <= float(self.p["clock_jump_back_s"]):
-            return
-        self.clock_jumps_back += 1
-        n = self._restart_timeline("clock_jump_back")
-        self.get_logger().warning(
-            f"simulated clock jumped back {last - now:.3f} s (from {last:.3f} to {now:.3f}; "
-            f"a bag loop?): processed {n} buffered measurement(s) of the old timeline, "
-            "reset the filter and the reorder buffer"
-        )
-
-    def _restart_timeline(self, reason: str) -> int:
-        """Finish the old timeline and start a new one; returns the items processed."""
-        n = self.buffer.pending
-        self._process(self.buffer.flush())
-        for src, held in self._held.items():
-            if held:
-                self._drop_held(src)
-        self.estimator.reset(reason)
-        # time starts again: forget the old timeline so earlier stamps are not "out of order"
-        self.estimator.t = None
-        self.estimator.last_used_t = None
-        self.buffer = self._new_buffer()
-        for src in self._seen:  # a loop repeats the same messages: they are new again
-            self._seen[src].clear()
-            self._seen_order[src].clear()
-        self._late_run = 0
-        return n
-
-    def _push(self, m: Measurement) -> None:
-        if not self.buffer.push(m.source, m.t, m):
-            key = f"late_{m.source}"
-            if self.dropped[key] == 0:
-                self.get_logger().warning(
-                    f"{m.source} measurement at {m.t:.3f} arrived after later ones were "
-                    f"processed (reorder window {self.buffer.window_s:g} s): dropped"
-                )
-            self.dropped[key] += 1
-            self._note_stale()
-            return
-        self._late_run = 0
-        self._process(self.buffer.release(self._sim_now()))
-
-    def _note_stale(self) -> None:
-        """One more message in a row that was late or a repeat; a long run of them means
-        the input timeline went back: start a new one."""
-        self._late_run += 1
-        limit = int(self.p["late_run_reset"])
-        if limit and self._late_run >= limit:
-            self.timeline_resets += 1
-            n = self._restart_timeline("timeline_back")
-            self.get_logger().warning(
-                f"{limit} messages in a row were late for the reorder window or repeats: the "
-                "input timeline went back (a bag loop without /clock, or an earlier jump "
-                f"ahead that was wrong); processed {n} buffered measurement(s), reset the "
-                "filter and the reorder buffer"
-            )
+    def warn(self, text: str) -> None:
+        self.get_logger().warning(text)
 
     def _sim_now(self) -> float | None:
         if not self.get_parameter("use_sim_time").value:
@@ -386,7 +279,7 @@ class FusionNode(Node):
                     for m in b.items:
                         steps.extend(self.estimator.process(m))
             except UavFusionError as exc:  # the estimator refused the input: count, go on
-                self.dropped[f"{b.source}_refused"] += len(b.items)
+                self._bad[f"{b.source}_refused"] += len(b.items)
                 self.get_logger().warning(f"estimator refused {b.source} at {b.t:.3f}: {exc}")
                 continue
             by_seq = {m.seq: m for m in b.items}
@@ -428,12 +321,7 @@ class FusionNode(Node):
 
         Stamps held back as too far ahead (unconfirmed) are dropped as ``future``.
         """
-        for src, held in self._held.items():
-            if held:
-                self._drop_held(src)
-        n = self.buffer.pending
-        self._process(self.buffer.flush())
-        return n
+        return self.timeline.flush()
 
     def _on_flush(self, _req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         n = self.flush()
@@ -442,11 +330,10 @@ class FusionNode(Node):
         return resp
 
     def _on_idle(self) -> None:
-        self._check_clock()
+        self.timeline.check_clock(self._sim_now())
         idle = float(self.get_parameter("idle_flush_s").value)
-        if self.buffer.pending:
-            self._process(self.buffer.release(self._sim_now()))
-        pending = self.buffer.pending or any(self._held.values())
+        self.timeline.release(self._sim_now())
+        pending = self.timeline.pending or self.timeline.holding
         if idle > 0 and pending and time.monotonic() - self._last_input >= idle:
             n = self.flush()
             self.get_logger().info(f"no input for {idle:g} s: flushed {n} measurement(s)")
@@ -458,7 +345,7 @@ class FusionNode(Node):
         for src in (RADAR, RF):
             vals[f"received_{src}"] = self.received[src]
             vals[f"used_{src}"] = self.used[src]
-            vals[f"held_{src}"] = len(self._held[src])
+            vals[f"held_{src}"] = len(self.timeline.held[src])
         for k, v in sorted(self.refused.items()):
             vals[f"rejected_{k}"] = v
         for k, v in sorted(self.statuses.items()):
@@ -504,7 +391,7 @@ class FusionNode(Node):
 
     def destroy_node(self) -> None:
         try:
-            if (self.buffer.pending or any(self._held.values())) and self.context.ok():
+            if (self.timeline.pending or self.timeline.holding) and self.context.ok():
                 self.flush()
         finally:
             super().destroy_node()

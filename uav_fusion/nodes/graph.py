@@ -3,7 +3,7 @@
 Creates ``truth_replay``, ``rf_replay``, ``radar_replay``, ``fusion_node`` and (unless
 disabled) ``evaluator_node`` in one rclpy context, each reading its parameters as usual
 (``--ros-args --params-file config/graph.yaml``; node names are the sections). The three
-replays hand their streams to **one** :class:`~uav_fusion.replay.ReplayDriver`, so every
+replays hand their streams to **one** :class:`~uav_fusion.ros.replay.ReplayDriver`, so every
 message is published in one global time order on one timeline, and ``/clock`` follows it.
 The timeline's settings (``rate``, ``clock_period_s``, ``batch_size``,
 ``wait_for_subscribers_s``) are ``truth_replay``'s; ``delay_s`` stays per replay.
@@ -39,7 +39,7 @@ from uav_fusion.nodes.fusion_node import FusionNode
 from uav_fusion.nodes.radar_replay import RadarReplay
 from uav_fusion.nodes.rf_replay import RfReplay
 from uav_fusion.nodes.truth_replay import TruthReplay
-from uav_fusion.replay import ReplayDriver, ReplayNode, flight_span
+from uav_fusion.ros.replay import ReplayDriver, ReplayNode, flight_span
 
 Overrides = dict[str, dict[str, Any]]
 

@@ -227,6 +227,14 @@ class FusionEstimator:
         self.tentative = False
         self.consecutive_rejections = 0
 
+    def restart_timeline(self, reason: str) -> None:
+        """The input's time starts over (a bag loop, a clock jumping back): drop the track
+        like :meth:`reset` and forget the current time, so earlier stamps than the last one
+        seen are not "out of order"."""
+        self.reset(reason)
+        self.t = None
+        self.last_used_t = None
+
     def state(self) -> tuple[FloatArray, FloatArray] | None:
         """Current (x, P), or None without a track."""
         if not self.active:

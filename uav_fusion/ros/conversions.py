@@ -44,7 +44,17 @@ from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
-from uav_fusion.core.errors import UavFusionError
+from uav_fusion.core.encoding import (
+    UNKNOWN_VARIANCE,
+    MessageError,
+    fix_type_from_status,
+    navsat_status,
+    ns_to_time,
+    pose_covariance,
+    rf_point,
+    stamp_parts,
+    time_to_ns,
+)
 from uav_fusion.core.records import (
     RADAR,
     RF,
@@ -57,20 +67,17 @@ from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Variance (rad^2, or (rad/s)^2) written for components that are not estimated.
-UNKNOWN_VARIANCE = 1.0e6
 #: Relative tolerance of the symmetry check on incoming covariance blocks.
 SYMMETRY_RTOL = 1.0e-9
 
 _NS = 1_000_000_000
 
-
-class MessageError(UavFusionError):
-    """An incoming message cannot be used; ``reason`` is a short key for drop counters."""
-
-    def __init__(self, reason: str, what: str) -> None:
-        self.reason = reason
-        super().__init__(f"{reason}: {what}")
+__all__ = [
+    "UNKNOWN_VARIANCE",
+    "MessageError",
+    "ns_to_time",
+    "time_to_ns",
+]
 
 
 class StepLike(Protocol):
@@ -91,31 +98,13 @@ class StepLike(Protocol):
 
 def stamp_from_time(t: float) -> Time:
     """UTC float seconds -> ``builtin_interfaces/Time`` (nearest nanosecond)."""
-    if not math.isfinite(t) or t < 0.0:
-        raise MessageError("bad_stamp", f"time {t!r} cannot be a ROS stamp")
-    sec = math.floor(t)
-    frac = t - sec  # exact for floats
-    nsec = round(frac * _NS)
-    if nsec >= _NS:
-        sec, nsec = sec + 1, nsec - _NS
-    return Time(sec=int(sec), nanosec=int(nsec))
+    sec, nsec = stamp_parts(t)
+    return Time(sec=sec, nanosec=nsec)
 
 
 def time_from_stamp(stamp: Time) -> float:
     """``builtin_interfaces/Time`` -> UTC float seconds (inverse of :func:`stamp_from_time`)."""
     return float(stamp.sec) + float(stamp.nanosec) / _NS
-
-
-def time_to_ns(t: float) -> int:
-    """UTC float seconds -> integer nanoseconds (the rclpy clock's unit)."""
-    s = stamp_from_time(t)
-    return int(s.sec) * _NS + int(s.nanosec)
-
-
-def ns_to_time(ns: int) -> float:
-    """Integer nanoseconds -> UTC float seconds."""
-    sec, nsec = divmod(int(ns), _NS)
-    return float(sec) + float(nsec) / _NS
 
 
 def _check_stamp(stamp: Time) -> float:
@@ -144,10 +133,7 @@ def _check_cov_block(c: FloatArray, what: str) -> None:
 
 
 def _pose_cov(pos: FloatArray) -> list[float]:
-    cov = np.zeros((6, 6))
-    cov[:3, :3] = pos
-    cov[3, 3] = cov[4, 4] = cov[5, 5] = UNKNOWN_VARIANCE
-    return [float(v) for v in cov.reshape(-1)]
+    return pose_covariance(pos.tolist())
 
 
 # --- radar --------------------------------------------------------------------------------
@@ -226,8 +212,11 @@ def rf_to_msg(t: float, en: tuple[float, float] | None, frame_id: str) -> PointS
 
 def rf_attempt_to_msg(a: RfAttempt, frame_id: str) -> PointStamped:
     """An RF localisation attempt (failed ones included) as a point."""
-    ok = a.ok and math.isfinite(a.e) and math.isfinite(a.n)
-    return rf_to_msg(a.t, (a.e, a.n) if ok else None, frame_id)
+    msg = PointStamped()
+    msg.header.stamp = stamp_from_time(a.t)
+    msg.header.frame_id = frame_id
+    msg.point.x, msg.point.y, msg.point.z = rf_point(a)
+    return msg
 
 
 def rf_measurement_to_msg(m: Measurement, frame_id: str) -> PointStamped:
@@ -267,30 +256,12 @@ def msg_to_rf_measurement(
 # --- truth --------------------------------------------------------------------------------
 
 
-def _status_from_fix_type(fix_type: int) -> int:
-    if fix_type >= 5:
-        return int(NavSatStatus.STATUS_GBAS_FIX)
-    if fix_type == 4:
-        return int(NavSatStatus.STATUS_SBAS_FIX)
-    if fix_type >= 2:
-        return int(NavSatStatus.STATUS_FIX)
-    return int(NavSatStatus.STATUS_NO_FIX)
-
-
-def _fix_type_from_status(status: int) -> int:
-    return {
-        int(NavSatStatus.STATUS_GBAS_FIX): 5,
-        int(NavSatStatus.STATUS_SBAS_FIX): 4,
-        int(NavSatStatus.STATUS_FIX): 3,
-    }.get(int(status), 0)
-
-
 def truth_to_navsatfix(fix: TruthFix, frame_id: str) -> NavSatFix:
     """A truth sample as NavSatFix (lat, lon, HAE altitude)."""
     msg = NavSatFix()
     msg.header.stamp = stamp_from_time(fix.t)
     msg.header.frame_id = frame_id
-    msg.status.status = _status_from_fix_type(fix.fix_type)
+    msg.status.status = navsat_status(fix.fix_type)
     msg.status.service = int(NavSatStatus.SERVICE_GPS)
     msg.latitude, msg.longitude, msg.altitude = float(fix.lat), float(fix.lon), float(fix.h)
     msg.position_covariance_type = int(NavSatFix.COVARIANCE_TYPE_UNKNOWN)
@@ -314,7 +285,7 @@ def navsatfix_to_truth(msg: NavSatFix, site: Site) -> TruthFix:
         n=float(n),
         u=float(u),
         vel_ned=(nan, nan, nan),
-        fix_type=_fix_type_from_status(msg.status.status),
+        fix_type=fix_type_from_status(msg.status.status),
         num_sats=0,
     )
 

@@ -37,30 +37,15 @@ from rclpy.clock_type import ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from uav_fusion.conversions import ns_to_time, stamp_from_time
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site, load_site
-from uav_fusion.params import Param, declare_all, not_empty, run_node
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
-
-
-def stream_qos(depth: int) -> QoSProfile:
-    """QoS of every replay and fusion stream: reliable, keep last ``depth``, volatile."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.VOLATILE,
-    )
-
-
-CLOCK_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
-)
+from uav_fusion.ros.conversions import ns_to_time, stamp_from_time
+from uav_fusion.ros.params import Param, declare_all, not_empty, run_node
+from uav_fusion.ros.qos import CLOCK_QOS, stream_qos
 
 
 def replay_params(publish_clock: bool) -> list[Param]:
