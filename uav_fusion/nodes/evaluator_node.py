@@ -31,20 +31,17 @@ import math
 import sys
 import threading
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
@@ -66,10 +63,13 @@ from uav_fusion.ros.conversions import (
 from uav_fusion.ros.diagnostics import make_status
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import stream_qos
+from uav_fusion.ros.runtime import run_node
 
 M = TypeVar("M")
 
 NODE_NAME = "evaluator_node"
+#: wall seconds the stop (writing the report with its figures) and teardown may take
+REPORT_GRACE_S = 120.0
 
 PARAMS: tuple[Param, ...] = (
     Param("site_file", "", "site YAML ('' = the shipped site)"),
@@ -419,30 +419,19 @@ def _with_dropped(ev: Evaluation, dropped: dict[str, int]) -> Evaluation:
     return replace(ev, dropped=dropped)
 
 
-def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node: EvaluatorNode | None = None
-    try:
-        node = EvaluatorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except UavFusionError as exc:
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
-        try_shutdown()
-        return 2
-    finally:
-        if node is not None:
-            node._refresh_runtime_params()
-            if node.write_on_shutdown:
-                try:
-                    files = node.write_report()
-                    print(f"{NODE_NAME}: report written to {files.folder}", file=sys.stderr)
-                except (UavFusionError, OSError) as exc:
-                    print(f"{NODE_NAME}: report not written: {exc}", file=sys.stderr)
-            node.destroy_node()
-        try_shutdown()
-    return 0
+def main(args: Sequence[str] | None = None) -> int:
+    def on_stop(node: Node, _executor: Any) -> None:
+        assert isinstance(node, EvaluatorNode)
+        node._refresh_runtime_params()
+        if node.write_on_shutdown:
+            try:
+                files = node.write_report()
+                print(f"{NODE_NAME}: report written to {files.folder}", file=sys.stderr)
+            except (UavFusionError, OSError) as exc:
+                print(f"{NODE_NAME}: report not written: {exc}", file=sys.stderr)
+
+    return run_node(EvaluatorNode, args, on_stop=on_stop, name=NODE_NAME,
+                    stop_grace_s=REPORT_GRACE_S)
 
 
 if __name__ == "__main__":

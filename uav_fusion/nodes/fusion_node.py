@@ -55,8 +55,9 @@ from uav_fusion.core.site import load_site
 from uav_fusion.core.timeline import Timeline, TimelineConfig
 from uav_fusion.ros import conversions as cv
 from uav_fusion.ros.diagnostics import make_status
-from uav_fusion.ros.params import Param, declare_all, not_empty, run_node
+from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import stream_qos
+from uav_fusion.ros.runtime import run_node
 
 NODE_NAME = "fusion_node"
 
@@ -398,7 +399,7 @@ class FusionNode(Node):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_node(FusionNode, args)
+    return run_node(FusionNode, args, name=NODE_NAME)
 
 
 if __name__ == "__main__":

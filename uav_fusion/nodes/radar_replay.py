@@ -80,7 +80,7 @@ class RadarReplay(ReplayNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_replay(RadarReplay, args)
+    return run_replay(RadarReplay, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ class RfReplay(ReplayNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_replay(RfReplay, args)
+    return run_replay(RfReplay, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -41,7 +41,7 @@ class TruthReplay(ReplayNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_replay(TruthReplay, args)
+    return run_replay(TruthReplay, args, NODE_NAME)
 
 
 if __name__ == "__main__":
