@@ -12,7 +12,7 @@ DEV_STAMP := $(VENV)/.dev-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 DOMAIN = $${ROS_DOMAIN_ID:-$$(( RANDOM % 100 + 1 ))}
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench bench-node clean
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -39,6 +39,10 @@ lint: $(DEV_STAMP)
 
 bench: $(DEV_STAMP)
 	ROS_DOMAIN_ID=$(DOMAIN) $(PY) scripts/bench_filter.py
+
+# fusion_node against a bare rclpy relay (own processes, own domain above 100)
+bench-node: $(DEV_STAMP)
+	$(PY) scripts/bench_node.py $(BENCH_ARGS)
 
 clean:
 	rm -rf build install log out .pytest_cache .mypy_cache .ruff_cache
