@@ -98,10 +98,19 @@ def receiver_main(out: str) -> int:
 
     got: list[tuple[int, float]] = []
 
+    ready = Path(out + ".ready")
+
     class Receiver(Node):
         def __init__(self) -> None:
             super().__init__("bench_receiver")
-            self.create_subscription(Odometry, "fusion/odom", self.on_msg, stream_qos(1000))
+            self.sub = self.create_subscription(Odometry, "fusion/odom", self.on_msg,
+                                                stream_qos(1000))
+            self.create_timer(0.05, self.check)
+
+        def check(self) -> None:
+            # matched with the node's writer: from now on nothing it publishes is missed
+            if not ready.exists() and self.sub.get_publisher_count() >= 1:
+                ready.write_text("matched\n")
 
         def on_msg(self, m: Any) -> None:
             got.append((m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
@@ -245,6 +254,7 @@ class Bench:
     def run(self, kind: str, rate: float) -> Run:
         out = self.tmp / "received.txt"
         out.unlink(missing_ok=True)
+        Path(str(out) + ".ready").unlink(missing_ok=True)
         recv = subprocess.Popen([sys.executable, __file__, "--receiver", str(out)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         proc = self._start(kind, rate)
@@ -252,7 +262,8 @@ class Bench:
             ready = self._spin_until(
                 lambda: all(p.get_subscription_count() > 0 for p in self.pubs.values())
                 and self.node.count_publishers("fusion/odom") > 0
-                and self.node.count_subscribers("fusion/odom") > 0,
+                and self.node.count_subscribers("fusion/odom") > 0
+                and Path(str(out) + ".ready").exists(),
                 60.0,
             )
             if not ready:
