@@ -13,7 +13,7 @@ DEV_STAMP := $(VENV)/.dev-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 DOMAIN = $${ROS_DOMAIN_ID:-$$(( RANDOM % 100 + 1 ))}
 
-.PHONY: demo test lint bench bench-accuracy fuzz clean
+.PHONY: demo test lint bench bench-accuracy bench-node fuzz clean
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,7 @@ fuzz: $(DEV_STAMP)
 lint: $(DEV_STAMP)
 	$(VENV)/bin/ruff check uav_fusion test scripts
 	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 
 bench: $(DEV_STAMP)
 	ROS_DOMAIN_ID=$(DOMAIN) $(PY) scripts/bench_filter.py
@@ -50,6 +51,10 @@ bench: $(DEV_STAMP)
 # the accuracy benchmark's test half (docs/benchmark.md); BENCH_ARGS e.g. "--profiles paper tracker"
 bench-accuracy: $(RUNTIME_STAMP)
 	$(VENV)/bin/uav_fusion bench $(BENCH_ARGS)
+
+# fusion_node against a bare rclpy relay (own processes, own domain above 100)
+bench-node: $(DEV_STAMP)
+	$(PY) scripts/bench_node.py $(BENCH_ARGS)
 
 clean:
 	rm -rf build install log out .pytest_cache .mypy_cache .ruff_cache

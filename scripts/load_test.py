@@ -43,10 +43,10 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
-from uav_fusion.conversions import stamp_from_time
 from uav_fusion.nodes.graph import Graph
-from uav_fusion.replay import flight_span
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+from uav_fusion.ros.conversions import stamp_from_time
+from uav_fusion.ros.replay import flight_span
 
 BIN = Path(sys.executable).parent
 TOPICS = ("truth/fix", "rf/fix", "radar/raw")

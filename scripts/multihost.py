@@ -471,8 +471,8 @@ def _recording_fusion_node() -> type[Any]:
     the node's watermark just before it arrived (the latest stamp of any stream or the
     simulated clock, whichever is later), the wall time, and whether the node dropped it as
     late for its reorder window."""
-    from uav_fusion import conversions as cv
     from uav_fusion.nodes.fusion_node import FusionNode
+    from uav_fusion.ros import conversions as cv
 
     class RecordingFusionNode(FusionNode):  # type: ignore[misc]
         def __init__(self, **kwargs: Any) -> None:
@@ -495,11 +495,13 @@ def _recording_fusion_node() -> type[Any]:
             self.step_log.append((float(step.t), str(step.source), bool(step.updated)))
             super()._publish_step(step, by_seq)
 
-        def _on_rf(self, msg: Any) -> None:
-            self._record("rf", msg, super()._on_rf)
+        # the node drains both input queues per callback and handles each message in
+        # _one_rf / _one_radar: record there, so every message is seen once, in order
+        def _one_rf(self, msg: Any) -> None:
+            self._record("rf", msg, super()._one_rf)
 
-        def _on_radar(self, msg: Any) -> None:
-            self._record("radar", msg, super()._on_radar)
+        def _one_radar(self, msg: Any) -> None:
+            self._record("radar", msg, super()._one_radar)
 
     return RecordingFusionNode
 

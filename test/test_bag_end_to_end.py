@@ -12,10 +12,10 @@ import pytest
 from test_graph_flight import write_flight
 
 from uav_fusion.cli import main
-from uav_fusion.conversions import time_from_stamp
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator import load_profile, run_flight
 from uav_fusion.core.site import load_site
+from uav_fusion.ros.conversions import time_from_stamp
 
 
 def _odom_row(m: Any) -> list[float]:

@@ -338,7 +338,7 @@ def test_ctrl_c_stops_cleanly_and_reports_what_was_played(tmp_path: Path) -> Non
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 130, out
+    assert proc.returncode == 0, out  # a stop by a signal is a clean stop
     assert "Traceback" not in out
     assert "interrupted" in out and "/a 2" in out
 

@@ -288,18 +288,18 @@ def test_convert_flight_writes_what_the_replay_nodes_publish(tmp_path: Path) -> 
     from test_graph_flight import write_flight
 
     from uav_fusion.bag.convert import convert_flight
-    from uav_fusion.conversions import time_from_stamp
     from uav_fusion.core.dataset import load_flight
     from uav_fusion.core.estimator import load_profile
+    from uav_fusion.core.radar_choice import raw_radar_reports, selected_radar
     from uav_fusion.core.site import load_site
-    from uav_fusion.nodes.radar_replay import selected_radar, uav_class_reports
+    from uav_fusion.ros.conversions import time_from_stamp
 
     site = load_site()
     flight = load_flight(write_flight(tmp_path / "f", seconds=20.0), site)
     res = convert_flight(flight, site, tmp_path / "bag", namespace="uav")
     prof = load_profile("paper")
     selected = [m for group in selected_radar(flight, prof, site) for m in group]
-    raw = uav_class_reports(flight, prof)
+    raw = raw_radar_reports(flight, prof)
     assert 0 < len(selected) < len(raw)
     r = BagReader(tmp_path / "bag")
     assert {t: v.count for t, v in r.topics.items()} == {

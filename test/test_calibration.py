@@ -8,8 +8,9 @@ import math
 import pytest
 
 from uav_fusion.cli import main as cli_main
-from uav_fusion.core.calibration import calibrate, format_calibration, uav_track_ids
+from uav_fusion.core.calibration import calibrate, format_calibration
 from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.radar_class import uav_track_ids
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
@@ -90,7 +91,7 @@ def test_statistics_on_a_hand_made_flight() -> None:
                   cep=None, valid_sensors=4, total_sensors=4),  # after the truth ends
     ]  # fmt: skip
     flight = Flight("hand", truth, frames, rf)
-    uav, other = uav_track_ids(flight, 0.5)
+    uav, other = uav_track_ids(flight.radar, 0.5)
     assert uav == {1, 2} and other == {3}  # track 1's mean is (0.9 + 0.4) / 2 = 0.65
 
     res = calibrate(flight, (0.0, 0.0, 50.0), range_gate_m=150.0, range_bins=(0.0, 150.0))
@@ -132,11 +133,10 @@ def test_one_uav_report_rule_for_calibration_evaluation_and_replay() -> None:
     """Calibration, the evaluate command's raw row and radar_replay's raw topic take the same
     reports: every report of the tracks whose mean catProb[0] reaches the threshold (a track
     with one UAV-looking report among bird ones stays out; one without probabilities is in)."""
-    from uav_fusion.commands.evaluate import uav_class_tracks as eval_rule
     from uav_fusion.core.estimator import load_profile
+    from uav_fusion.core.radar_choice import raw_radar_reports
     from uav_fusion.core.radar_class import track_mean_uav_prob, uav_class_tracks
     from uav_fusion.core.records import Flight, RadarFrame, RadarTrack
-    from uav_fusion.nodes.radar_replay import uav_class_reports
 
     def trk(t: float, tid: int, p: float | None) -> RadarTrack:
         return RadarTrack(t, tid, 0.0, 0.0, 0.0, 100.0, 200.0, 30.0, None, p, None, None)
@@ -152,8 +152,8 @@ def test_one_uav_report_rule_for_calibration_evaluation_and_replay() -> None:
     assert [(r.t, r.track_id) for r in uav] == [(1.0, 2), (1.0, 3), (2.0, 2), (2.0, 3), (3.0, 2)]
     assert len(uav_class_tracks(frames, None)) == 8
     flight = Flight(name="x", truth=[], radar=frames, rf=[])
-    ids, other = uav_track_ids(flight, 0.5)
+    ids, other = uav_track_ids(flight.radar, 0.5)
     assert ids == {2, 3} and other == {1}
     prof = load_profile("paper")
     assert prof.raw_radar_min_mean_uav_prob == 0.5 and prof.min_uav_prob is None
-    assert eval_rule(flight, 0.5) == uav == uav_class_reports(flight, prof)
+    assert uav == raw_radar_reports(flight, prof)

@@ -9,9 +9,9 @@ import pytest
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import NavSatStatus
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.records import RADAR, RF, Measurement, RfAttempt, TruthFix
 from uav_fusion.core.site import load_site
+from uav_fusion.ros import conversions as cv
 
 T0 = 1759866140.123456789  # a UTC time on the day of the real flights
 
@@ -123,3 +123,68 @@ def test_odometry_round_trip_keeps_blocks() -> None:
     assert np.array_equal(st.P[:3, :3], P[:3, :3])
     assert np.array_equal(st.P[3:, 3:], P[3:, 3:])
     assert not st.P[:3, 3:].any()
+
+
+def test_scalar_covariance_check_decides_like_numpy() -> None:
+    """check_cov3 (plain floats) accepts exactly what finite + allclose-symmetric + numpy's
+    Cholesky accept, on random, singular, indefinite, asymmetric and non-finite matrices."""
+    from uav_fusion.ros.conversions import SYMMETRY_RTOL, MessageError, check_cov3
+
+    def numpy_ok(c: np.ndarray) -> bool:
+        if not np.all(np.isfinite(c)):
+            return False
+        scale = float(np.max(np.abs(c))) or 1.0
+        if not np.allclose(c, c.T, rtol=0.0, atol=SYMMETRY_RTOL * scale):
+            return False
+        try:
+            np.linalg.cholesky(c)
+        except np.linalg.LinAlgError:
+            return False
+        return True
+
+    rng = np.random.default_rng(7)
+    cases: list[np.ndarray] = []
+    for _ in range(400):
+        a = rng.normal(size=(3, 3)) * rng.choice([1e-3, 1.0, 1e3])
+        cases.append(a @ a.T)  # positive (semi)definite
+        cases.append(a + a.T)  # symmetric, often indefinite
+        cases.append(a)  # asymmetric
+    v = rng.normal(size=3)
+    cases.append(np.outer(v, v))  # rank 1: singular
+    cases.append(np.zeros((3, 3)))
+    cases.append(np.diag([1.0, -1e-12, 1.0]))
+    cases.append(np.diag([np.nan, 1.0, 1.0]))
+    cases.append(np.diag([np.inf, 1.0, 1.0]))
+    n_ok = 0
+    for c in cases:
+        try:
+            check_cov3(*c.reshape(-1).tolist(), what="x")
+            ours = True
+        except MessageError as exc:
+            assert exc.reason == "bad_covariance"
+            ours = False
+        assert ours == numpy_ok(c), c
+        n_ok += ours
+    assert 300 < n_ok < len(cases) - 300  # both outcomes well represented
+
+
+def test_odometry_from_values_equals_the_array_path() -> None:
+    from uav_fusion.core.estimator import FusionEstimator, load_profile
+    from uav_fusion.core.site import load_site
+    from uav_fusion.ros.conversions import odometry_from_values, state_to_odometry
+
+    est = FusionEstimator(load_profile("paper"), load_site())
+    z0 = np.asarray(est.site.radar.enu) + 80.0
+    steps = []
+    for k in range(5):
+        steps += est.process(
+            Measurement(t=1759866140.25 + k, source=RADAR, z=z0 + k, R=None, seq=k)
+        )
+    assert len(steps) == 5
+    for s in steps:
+        a = odometry_from_values(s.t, s.values, "enu_lw1", "uav")
+        b = state_to_odometry(s.t, s.x, s.P, "enu_lw1", "uav")
+        assert a.header == b.header and a.child_frame_id == b.child_frame_id
+        assert a.pose.pose == b.pose.pose and a.twist.twist == b.twist.twist
+        assert np.array_equal(a.pose.covariance, b.pose.covariance)
+        assert np.array_equal(a.twist.covariance, b.twist.covariance)

@@ -22,16 +22,16 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
-from uav_fusion.conversions import (
+from uav_fusion.core.evaluation import Evaluator
+from uav_fusion.core.records import TruthFix
+from uav_fusion.core.site import Site, load_site
+from uav_fusion.nodes.evaluator_node import EvaluatorNode
+from uav_fusion.ros.conversions import (
     radar_to_msg,
     rf_to_msg,
     state_to_odometry,
     truth_to_navsatfix,
 )
-from uav_fusion.core.evaluation import Evaluator
-from uav_fusion.core.records import TruthFix
-from uav_fusion.core.site import Site, load_site
-from uav_fusion.nodes.evaluator_node import EvaluatorNode
 
 T0 = 1_760_000_000.0
 R3 = np.diag([25.0, 25.0, 100.0])
@@ -267,7 +267,7 @@ def test_write_report_failure_is_reported_not_raised(ros: None, tmp_path: Path) 
 
 
 def test_bad_parameters_are_refused_with_their_name(ros: None) -> None:
-    from uav_fusion.params import ParamError
+    from uav_fusion.ros.params import ParamError
 
     with pytest.raises(ParamError, match="coverage_tolerance_s"):
         EvaluatorNode(parameter_overrides=[Parameter("coverage_tolerance_s", value=-1.0)])
@@ -296,8 +296,8 @@ def test_rcs_comes_from_the_flight_folder_when_given(ros: None, tmp_path: Path) 
     """Pose messages carry no RCS; with ``rcs_flight_dir`` each raw report gets its own."""
     from test_graph_flight import write_flight
 
-    from uav_fusion.conversions import radar_track_to_msg
     from uav_fusion.core.dataset import load_flight
+    from uav_fusion.ros.conversions import radar_track_to_msg
 
     site = load_site()
     folder = write_flight(tmp_path / "flight", seconds=10.0)

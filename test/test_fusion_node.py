@@ -21,14 +21,14 @@ from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 from test_graph_flight import write_flight
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator import flight_measurements, load_profile, run_flight
 from uav_fusion.core.records import RADAR, Measurement
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode
-from uav_fusion.params import ParamError
-from uav_fusion.replay import stream_qos
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.params import ParamError
+from uav_fusion.ros.qos import stream_qos
 
 FRAME = "enu_lw1"
 

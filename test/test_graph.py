@@ -11,13 +11,13 @@ from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from test_graph_flight import write_flight
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator import load_profile, run_flight
 from uav_fusion.core.evaluation import Evaluator, feed_flight, feed_steps
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.graph import Graph
-from uav_fusion.replay import stream_qos
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.qos import stream_qos
 
 
 @pytest.fixture(scope="module")

@@ -19,9 +19,9 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.records import RADAR, RF, Measurement
-from uav_fusion.replay import stream_qos
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.qos import stream_qos
 
 FRAME = "enu_lw1"
 T0 = 1759866140.0  # 2025-10-07T19:42:20Z, the synthetic flight's start

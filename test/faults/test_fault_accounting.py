@@ -27,8 +27,8 @@ from faultkit import (
 )
 from rclpy.context import Context
 
-from uav_fusion import conversions as cv
 from uav_fusion.nodes.graph import Graph
+from uav_fusion.ros import conversions as cv
 
 
 def overrides(flight_dir: Path, out: Path, rate: float, depth: int = 1000) -> dict[str, Any]:

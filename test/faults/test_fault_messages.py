@@ -23,7 +23,7 @@ from faultkit import (
 )
 from rclpy.context import Context
 
-from uav_fusion import conversions as cv
+from uav_fusion.ros import conversions as cv
 
 
 def track(h: FusionHarness, t_from: float, t_to: float, dt: float = 0.25) -> list[float]:

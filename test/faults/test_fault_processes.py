@@ -27,8 +27,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 
-from uav_fusion import conversions as cv
-from uav_fusion.replay import stream_qos
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.qos import stream_qos
 
 pytestmark = pytest.mark.processes
 
@@ -140,6 +140,10 @@ def test_fusion_node_sigkill_and_restart_reinitialises_and_the_gap_is_reported(
             60.0, "fusion_node and evaluator_node",
         )
         obs.spin_until(lambda: bool(eval_inputs(obs)), 30.0, "evaluator diagnostics")
+        # the fusion node's own view: its updated writer is matched with the evaluator
+        obs.spin_until(
+            lambda: int(obs.diag.get("fusion_node: fusion", {}).get("subscribers_updated", 0))
+            >= 1, 60.0, "the evaluator matched with fusion_node")
         before = obs.readers("radar/pose")
 
         def segment(t_from: float, t_to: float) -> int:
@@ -148,8 +152,13 @@ def test_fusion_node_sigkill_and_restart_reinitialises_and_the_gap_is_reported(
                 obs.pub_radar.publish(radar_msg(float(t), *straight(float(t))))
             return len(ts)
 
+        def evaluator_steps() -> int:
+            return int(eval_inputs(obs).get("used fusion/odom/updated", "0"))
+
         n1 = segment(T0, T0 + 10.0)
         obs.spin_until(lambda: len(obs.odom) >= n1, 60.0, "steps of the first fusion_node")
+        # the gap is measured from the last step the evaluator received: let it have them all
+        obs.spin_until(lambda: evaluator_steps() >= n1, 60.0, "the evaluator's first steps")
         procs.procs["fusion1"].send_signal(signal.SIGKILL)
         assert procs.procs["fusion1"].wait(timeout=10) == -signal.SIGKILL
         segment(T0 + 10.0, T0 + 20.0)  # nobody fuses these
@@ -157,9 +166,6 @@ def test_fusion_node_sigkill_and_restart_reinitialises_and_the_gap_is_reported(
         obs.wait_new_reader("radar/pose", before)
         # our odometry reader must match the new node before it publishes anything
         obs.spin_until(lambda: obs.sub_odom.get_publisher_count() >= 1, 60.0, "new odom writer")
-
-        def evaluator_steps() -> int:
-            return int(eval_inputs(obs).get("used fusion/odom/updated", "0"))
 
         # The evaluator matches the new node on its own time (discovery takes up to seconds
         # on a loaded machine) and volatile QoS loses what was published before that, so

@@ -20,8 +20,8 @@ from faultkit import (
 )
 from rclpy.context import Context
 
-from uav_fusion import conversions as cv
 from uav_fusion.core.site import load_site
+from uav_fusion.ros import conversions as cv
 
 
 def radar_track(t_from: float, t_to: float, dt: float = 0.25) -> list[object]:

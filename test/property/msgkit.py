@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import NavSatFix
 
-from uav_fusion import conversions as cv
+from uav_fusion.ros import conversions as cv
 
 __all__ = ["FRAME", "T0", "cv", "navsatfixes", "odometries", "points", "poses"]
 

@@ -12,10 +12,13 @@ The bag holds exactly what the replay nodes would publish for the same flight an
 - ``truth/fix``: the RTK truth, ``sensor_msgs/NavSatFix``.
 
 Topic names sit under an optional namespace. Every message is stored at its sensor UTC time
-(receive time = stamp), so the player's ``/clock`` is sensor time. Messages come from
-:mod:`uav_fusion.conversions` and the selection from the radar replay's own functions;
-serialization is rclpy's, so the bytes are the ones a live publisher sends. The profile's name
-and radar R are stored in ``metadata.yaml``'s ``custom_data``.
+(receive time = stamp), so the player's ``/clock`` is sensor time. The field rules are
+:mod:`uav_fusion.core.encoding` (shared with the live conversions of
+:mod:`uav_fusion.ros.conversions`) and the selection is :mod:`uav_fusion.core.radar_choice`
+(shared with ``radar_replay``); serialization is rosbags' CDR, whose bytes equal those of a
+live rclpy publisher except alignment padding, which rosbags writes as zeros and rclpy leaves
+as whatever was in memory (tested). No rclpy is needed. The profile's name and radar R are
+stored in ``metadata.yaml``'s ``custom_data``.
 """
 
 from __future__ import annotations
@@ -28,8 +31,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from uav_fusion.bag.writer import BagWriter, WrittenBag
-from uav_fusion.core.records import Flight
+from uav_fusion.bag.writer import BagWriter, WrittenBag, jazzy_typestore
+from uav_fusion.core import encoding as enc
+from uav_fusion.core.encoding import time_to_ns
+from uav_fusion.core.radar_choice import radar_profile, raw_radar_reports, selected_radar
+from uav_fusion.core.records import Flight, RfAttempt, TruthFix
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
@@ -39,6 +45,13 @@ RADAR_POSE = "radar/pose"
 RADAR_RAW = "radar/raw"
 RF_FIX = "rf/fix"
 TRUTH_FIX = "truth/fix"
+#: Message type of every topic.
+TYPES = {
+    RADAR_POSE: "geometry_msgs/msg/PoseWithCovarianceStamped",
+    RADAR_RAW: "geometry_msgs/msg/PoseWithCovarianceStamped",
+    RF_FIX: "geometry_msgs/msg/PointStamped",
+    TRUTH_FIX: "sensor_msgs/msg/NavSatFix",
+}
 
 _RELIABLE = ({"reliability": "reliable", "durability": "volatile", "history": "keep_last",
               "depth": 1000},)
@@ -76,47 +89,34 @@ def convert_flight(
     ``profile`` names an estimator profile (its radar R, UAV-class threshold and track
     selection); ``track_selection`` overrides the selection ("profile": the profile's own).
     """
-    from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
-    from rclpy.serialization import serialize_message
-    from sensor_msgs.msg import NavSatFix
-
-    from uav_fusion import conversions as conv
-    from uav_fusion.core.estimator import load_profile
-    from uav_fusion.nodes.radar_replay import selected_radar, uav_class_reports
-
-    prof = load_profile(profile)
-    if track_selection != "profile" and track_selection != prof.radar_selection:
-        prof = prof.with_changes(radar_selection=track_selection)
+    prof = radar_profile(profile, track_selection)
     R = np.asarray(prof.r_radar, dtype=float)
     frame = site.frame_id
     names = {leaf: topic_name(namespace, leaf)
              for leaf in (RADAR_POSE, RADAR_RAW, RF_FIX, TRUTH_FIX)}
-    types: dict[str, Any] = {
-        RADAR_POSE: PoseWithCovarianceStamped,
-        RADAR_RAW: PoseWithCovarianceStamped,
-        RF_FIX: PointStamped,
-        TRUTH_FIX: NavSatFix,
-    }
+    ts = jazzy_typestore()
+    msgs = CdrMessages(ts)
     # (time, order, leaf, message): one stable time order across the four streams
     items: list[tuple[float, int, str, Any]] = []
     for group in selected_radar(flight, prof, site):
         for m in group:
-            items.append((m.t, len(items), RADAR_POSE, conv.radar_measurement_to_msg(m, frame, R)))
-    for trk in uav_class_reports(flight, prof):
-        items.append((trk.t, len(items), RADAR_RAW, conv.radar_track_to_msg(trk, R, frame)))
+            mR = m.R if m.R is not None else R
+            items.append((m.t, len(items), RADAR_POSE, msgs.radar_pose(m.t, m.z, mR, frame)))
+    for trk in raw_radar_reports(flight, prof):
+        pos = (trk.e, trk.n, trk.u)
+        items.append((trk.t, len(items), RADAR_RAW, msgs.radar_pose(trk.t, pos, R, frame)))
     for a in flight.rf:
-        items.append((a.t, len(items), RF_FIX, conv.rf_attempt_to_msg(a, frame)))
+        items.append((a.t, len(items), RF_FIX, msgs.rf_fix(a, frame)))
     for f in flight.truth:
-        items.append((f.t, len(items), TRUTH_FIX, conv.truth_to_navsatfix(f, truth_frame)))
+        items.append((f.t, len(items), TRUTH_FIX, msgs.truth_fix(f, truth_frame)))
     items.sort(key=lambda it: (it[0], it[1]))
 
     writer = BagWriter(out)
     try:
-        for leaf, cls in types.items():
-            pkg = cls.__module__.split(".")[0]
-            writer.add_topic(names[leaf], f"{pkg}/msg/{cls.__name__}", qos=_RELIABLE)
+        for leaf, msgtype in TYPES.items():
+            writer.add_topic(names[leaf], msgtype, qos=_RELIABLE)
         for t, _k, leaf, msg in items:
-            writer.write(names[leaf], conv.time_to_ns(t), serialize_message(msg))
+            writer.write(names[leaf], time_to_ns(t), ts.serialize_cdr(msg, TYPES[leaf]))
         written = writer.close()
     except BaseException:
         writer.abort()
@@ -142,3 +142,59 @@ def _store_custom(path: Path, R: FloatArray, profile: str, selection: str, name:
     }
     meta_path.write_text(yaml.safe_dump(doc, default_flow_style=False, sort_keys=False),
                          encoding="utf-8")
+
+
+class CdrMessages:
+    """Our message types as rosbags message objects (rules: :mod:`uav_fusion.core.encoding`)."""
+
+    def __init__(self, typestore: Any) -> None:
+        t = typestore.types
+        self._time = t["builtin_interfaces/msg/Time"]
+        self._header = t["std_msgs/msg/Header"]
+        self._point = t["geometry_msgs/msg/Point"]
+        self._quat = t["geometry_msgs/msg/Quaternion"]
+        self._pose = t["geometry_msgs/msg/Pose"]
+        self._pose_cov = t["geometry_msgs/msg/PoseWithCovariance"]
+        self._pose_stamped = t["geometry_msgs/msg/PoseWithCovarianceStamped"]
+        self._point_stamped = t["geometry_msgs/msg/PointStamped"]
+        self._status = t["sensor_msgs/msg/NavSatStatus"]
+        self._fix = t["sensor_msgs/msg/NavSatFix"]
+
+    def header(self, t: float, frame_id: str) -> Any:
+        sec, nsec = enc.stamp_parts(t)
+        return self._header(stamp=self._time(sec=sec, nanosec=nsec), frame_id=frame_id)
+
+    def radar_pose(
+        self, t: float, enu: Any, R: FloatArray, frame_id: str
+    ) -> Any:
+        """A radar position (ENU metres) with its 3x3 covariance (PoseWithCovarianceStamped)."""
+        Rm = np.asarray(R, dtype=float)
+        if Rm.shape != (3, 3):
+            raise enc.MessageError("bad_covariance", f"radar R must be 3x3, got {Rm.shape}")
+        pose = self._pose(
+            position=self._point(x=float(enu[0]), y=float(enu[1]), z=float(enu[2])),
+            orientation=self._quat(x=0.0, y=0.0, z=0.0, w=1.0),
+        )
+        cov = np.array(enc.pose_covariance(Rm.tolist()), dtype=np.float64)
+        return self._pose_stamped(
+            header=self.header(t, frame_id), pose=self._pose_cov(pose=pose, covariance=cov)
+        )
+
+    def rf_fix(self, a: RfAttempt, frame_id: str) -> Any:
+        """An RF attempt (PointStamped; NaN for a failed one)."""
+        x, y, z = enc.rf_point(a)
+        return self._point_stamped(
+            header=self.header(a.t, frame_id), point=self._point(x=x, y=y, z=z)
+        )
+
+    def truth_fix(self, f: TruthFix, frame_id: str) -> Any:
+        """A truth sample (NavSatFix: lat, lon, HAE altitude, covariance unknown)."""
+        return self._fix(
+            header=self.header(f.t, frame_id),
+            status=self._status(status=enc.navsat_status(f.fix_type), service=enc.SERVICE_GPS),
+            latitude=float(f.lat),
+            longitude=float(f.lon),
+            altitude=float(f.h),
+            position_covariance=np.zeros(9, dtype=np.float64),
+            position_covariance_type=enc.COVARIANCE_TYPE_UNKNOWN,
+        )

@@ -58,7 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--record",
         metavar="DIR",
         help="with --bag: also run bag_recorder and record the fusion node's outputs "
-        "(fusion/odom*, fusion/accepted/*, /diagnostics) into this rosbag2 MCAP directory",
+        "and views and its inputs (fusion/*, radar/*, rf/fix, truth/fix, /diagnostics) into "
+        "this rosbag2 MCAP directory",
     )
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
     parser.add_argument("--no-check", action="store_true", help="skip the offline comparison")
@@ -159,13 +160,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-# What ``demo --bag --record`` records: the fusion node's outputs.
+# What ``demo --bag --record`` records: the fusion node's outputs and views, and the inputs
+# (so the recording alone opens in Foxglove / RViz with config/foxglove_layout.json and
+# config/uav_fusion.rviz; docs/views.md).
 RECORDED_TOPICS = (
     "fusion/odom",
     "fusion/odom/updated",
     "fusion/odom/coasted",
     "fusion/accepted/radar",
     "fusion/accepted/rf",
+    "fusion/path",
+    "fusion/markers",
+    "fusion/fix",
+    "radar/pose",
+    "radar/raw",
+    "rf/fix",
+    "truth/fix",
     "/diagnostics",
 )
 
@@ -244,6 +254,7 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
             )
         )
         fusion.flush()
+        fusion.publish_views(force=True)  # the final path and markers
         expected = sum(played.values()) - sum(played[t] for t in ("/radar/pose", "/clock"))
         ok = ok and spin_until(
             lambda: (
@@ -259,6 +270,8 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
                     and recorder.received["/fusion/accepted/radar"]
                     + recorder.received["/fusion/accepted/rf"]
                     >= fusion.accepted_published
+                    and recorder.received["/fusion/path"] >= fusion.paths_published
+                    and recorder.received["/fusion/markers"] >= fusion.markers_published
                 )
             )
             written = recorder.close()

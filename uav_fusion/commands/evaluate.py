@@ -9,7 +9,7 @@ from pathlib import Path
 from uav_fusion.core import radar_class
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.evaluation import Evaluation, Evaluator, feed_flight, feed_steps, format_table
-from uav_fusion.core.records import Flight, Measurement, RadarTrack
+from uav_fusion.core.records import Flight, Measurement
 from uav_fusion.core.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
@@ -40,14 +40,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strict", action="store_true",
                         help="stop at the first bad input row instead of skipping it")
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
-
-
-def uav_class_tracks(flight: Flight, min_mean_uav_prob: float | None) -> list[RadarTrack]:
-    """The raw radar row: every report of the tracks the radar classed as the UAV's (mean
-    ``catProb[0]`` over the track at least ``min_mean_uav_prob``; every report when None),
-    before selection and gating: :func:`uav_fusion.core.radar_class.uav_class_tracks`, the
-    rule radar_replay applies to its ``radar/raw`` topic."""
-    return radar_class.uav_class_tracks(flight.radar, min_mean_uav_prob)
 
 
 def evaluate_flight(
@@ -87,7 +79,7 @@ def evaluate_flight(
     raw_thr = (
         profile.raw_radar_min_mean_uav_prob if raw_min_uav_prob is None else raw_min_uav_prob
     )
-    feed_flight(ev, flight, uav_class_tracks(flight, raw_thr))
+    feed_flight(ev, flight, radar_class.uav_class_tracks(flight.radar, raw_thr))
     feed_steps(ev, result.steps, measurements)
     info = {
         "mode": "offline (uav_fusion evaluate)",

@@ -77,12 +77,6 @@ class CalibrationResult:
     notes: list[str] = field(default_factory=list)
 
 
-def uav_track_ids(flight: Flight, threshold: float = 0.5) -> tuple[set[int], set[int]]:
-    """(UAV track ids, other track ids) by each track's mean ``catProb[0]``
-    (:func:`uav_fusion.core.radar_class.uav_track_ids`, the rule of the raw radar row)."""
-    return radar_class.uav_track_ids(flight.radar, threshold)
-
-
 def calibrate(
     flight: Flight,
     radar_enu: tuple[float, float, float],
@@ -100,7 +94,7 @@ def calibrate(
         notes.append("fewer than two truth samples: nothing can be scored")
 
     # --- radar ------------------------------------------------------------------------------
-    uav_ids, other_ids = uav_track_ids(flight, uav_prob_threshold)
+    uav_ids, other_ids = radar_class.uav_track_ids(flight.radar, uav_prob_threshold)
     rt: list[float] = []
     rpos: list[tuple[float, float, float]] = []
     rcs: list[float] = []

@@ -22,14 +22,15 @@ from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from uav_fusion.bag.reader import BagReader, BagTopic, qos_reliability, qos_transient_local
 from uav_fusion.core.errors import ConfigError, UavFusionError
+from uav_fusion.ros.qos import CLOCK_QOS, make_qos
+from uav_fusion.ros.runtime import EXIT_FAILED, EXIT_OK, App, UsageError, run_app
 
 
 def message_class(msgtype: str) -> Any:
@@ -153,7 +154,7 @@ class BagPlayer(Node):
                                  + (f" ({'; '.join(self.skipped.values())})" if self.skipped
                                     else ""))
         self._clock_pub = (
-            self.create_publisher(Clock, "/clock", QoSProfile(depth=10))
+            self.create_publisher(Clock, "/clock", CLOCK_QOS)
             if publish_clock else None
         )
         start = self.reader.start_ns + int(float(g("start_offset").value) * 1e9)
@@ -174,13 +175,10 @@ class BagPlayer(Node):
     @staticmethod
     def _qos(topic: BagTopic, reliability: str, depth: int) -> QoSProfile:
         rel = reliability or qos_reliability(topic.offered_qos) or "reliable"
-        return QoSProfile(
-            history=HistoryPolicy.KEEP_LAST,
+        return make_qos(
+            reliable=rel != "best_effort",
+            transient_local=qos_transient_local(topic.offered_qos),
             depth=depth,
-            reliability=ReliabilityPolicy.BEST_EFFORT if rel == "best_effort"
-            else ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL if qos_transient_local(topic.offered_qos)
-            else DurabilityPolicy.VOLATILE,
         )
 
     # -- control -----------------------------------------------------------------------------
@@ -274,6 +272,8 @@ class BagPlayer(Node):
                     now = time.monotonic()
                     if now < target:
                         self._publish_clock(bag0 + int((now - wall0) * self.rate * 1e9))
+                if self._stop.is_set():
+                    break  # stopped while waiting: this message is not due yet
                 self._publish_clock(msg.timestamp_ns)
                 self._pubs[msg.topic].publish(msg.data)
                 self.played[self._out[msg.topic]] += 1
@@ -282,7 +282,7 @@ class BagPlayer(Node):
                 break
         interrupted = self._make_summary()
         if interrupted:
-            return  # main() reports; the context may already be shut down
+            return  # main() reports
         t_ack = time.monotonic()
         unacked = [
             self._out[n] for n, pub in self._pubs.items()
@@ -297,47 +297,30 @@ class BagPlayer(Node):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console entry point: ``bag_player [BAG] [--ros-args ...]``."""
-    args = list(sys.argv if argv is None else argv)
-    plain = rclpy.utilities.remove_ros_args(args)[1:]
-    if len(plain) > 1 or any(a.startswith("-") for a in plain):
-        print("usage: bag_player [BAG] [--ros-args -p name:=value ...]", file=sys.stderr)
-        return 2
-    rclpy.init(args=args)
-    node: BagPlayer | None = None
-    code = 0
-    try:
+    """Console entry point: ``bag_player [BAG] [--ros-args ...]``; exit 0 when the bag was
+    played or playback was stopped by SIGINT/SIGTERM, 1 when playback failed."""
+
+    def build(plain: list[str]) -> App:
+        if len(plain) > 1 or any(a.startswith("-") for a in plain):
+            raise UsageError("bag_player [BAG] [--ros-args -p name:=value ...]")
         node = BagPlayer(plain[0] if plain else None)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        node.start()
-        while not node.finished.is_set():
-            try:
-                executor.spin_once(timeout_sec=0.1)
-            except RuntimeError:
-                if rclpy.utilities.ok():
-                    raise
-                # a signal shut the context down while a message was being taken
-                raise ExternalShutdownException() from None
-        if node.error:
-            print(f"bag_player: error: {node.error}", file=sys.stderr)
-            code = 1
-    except UavFusionError as exc:
-        print(f"bag_player: error: {exc}", file=sys.stderr)
-        code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        code = 130 if node is None or not node.finished.is_set() else 0
-        if node is not None:
+
+        def on_stop(_executor: Any) -> None:
+            interrupted = not node.finished.is_set()
             node.stop()
-            if node.summary:
+            if interrupted and node.summary:
                 print(f"bag_player: {node.summary}", file=sys.stderr)
-    finally:
-        if node is not None:
-            node.stop()
-            node.destroy_node()
-        if rclpy.utilities.ok():
-            rclpy.shutdown()
-    return code
+
+        def status() -> int:
+            if node.error:
+                print(f"bag_player: error: {node.error}", file=sys.stderr)
+                return EXIT_FAILED
+            return EXIT_OK
+
+        return App("bag_player", [node], start=node.start, finished=node.finished.is_set,
+                   on_stop=on_stop, status=status)
+
+    return run_app("bag_player", build, argv)
 
 
 if __name__ == "__main__":

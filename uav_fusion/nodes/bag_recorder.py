@@ -16,26 +16,23 @@ SIGINT and SIGTERM stop it cleanly: it first takes every message DDS has already
 
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
-from types import FrameType
 from typing import Any
 
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 
 from uav_fusion.bag.writer import BagWriter, WrittenBag
 from uav_fusion.core.errors import ConfigError, UavFusionError
 from uav_fusion.nodes.bag_player import message_class
+from uav_fusion.ros.qos import make_qos, qos_words
+from uav_fusion.ros.runtime import App, UsageError, run_app
 
 #: Topics recorded by default (relative names follow the recorder's namespace; see
 #: docs/graph.md).
@@ -59,17 +56,6 @@ _GRAPH_TOPICS = {"/rosout", "/parameter_events"}
 
 def _desc(text: str, kind: int) -> ParameterDescriptor:
     return ParameterDescriptor(description=text, type=kind)
-
-
-def _qos_dict(q: QoSProfile) -> dict[str, Any]:
-    return {
-        "history": "keep_all" if q.history == HistoryPolicy.KEEP_ALL else "keep_last",
-        "depth": int(q.depth),
-        "reliability": "best_effort" if q.reliability == ReliabilityPolicy.BEST_EFFORT
-        else "reliable",
-        "durability": "transient_local" if q.durability == DurabilityPolicy.TRANSIENT_LOCAL
-        else "volatile",
-    }
 
 
 class BagRecorder(Node):
@@ -151,18 +137,14 @@ class BagRecorder(Node):
                 self._refuse(name, f"message type {msgtype} is not installed")
                 continue
             pubs = self.get_publishers_info_by_topic(name)
-            offered = [_qos_dict(i.qos_profile) for i in pubs]
+            offered = [qos_words(i.qos_profile) for i in pubs]
             rel = self.reliability or (
                 "best_effort" if offered and all(o["reliability"] == "best_effort"
                                                  for o in offered) else "reliable")
             durable = bool(offered) and all(o["durability"] == "transient_local" for o in offered)
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST if self.depth else HistoryPolicy.KEEP_ALL,
-                depth=self.depth or 1000,
-                reliability=ReliabilityPolicy.BEST_EFFORT if rel == "best_effort"
-                else ReliabilityPolicy.RELIABLE,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL if durable
-                else DurabilityPolicy.VOLATILE,
+            qos = make_qos(
+                reliable=rel != "best_effort", transient_local=durable,
+                depth=self.depth or 1000, keep_all=not self.depth,
             )
             try:
                 self.writer.add_topic(name, msgtype, qos=offered)
@@ -207,7 +189,7 @@ class BagRecorder(Node):
             return self._closed
 
 
-def drain(executor: SingleThreadedExecutor, recorder: BagRecorder, quiet_s: float = 0.3) -> None:
+def drain(executor: Executor, recorder: BagRecorder, quiet_s: float = 0.3) -> None:
     """Take messages already delivered until none has arrived for ``quiet_s``."""
     last = -1
     quiet_since = time.monotonic()
@@ -221,40 +203,22 @@ def drain(executor: SingleThreadedExecutor, recorder: BagRecorder, quiet_s: floa
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console entry point: ``bag_recorder [OUTPUT] [--ros-args ...]``."""
-    args = list(sys.argv if argv is None else argv)
-    plain = rclpy.utilities.remove_ros_args(args)[1:]
-    if len(plain) > 1 or any(a.startswith("-") for a in plain):
-        print("usage: bag_recorder [OUTPUT] [--ros-args -p name:=value ...]", file=sys.stderr)
-        return 2
-    stop = threading.Event()
 
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    # our own handlers: rclpy's would shut the context down before we drain and close
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    recorder: BagRecorder | None = None
-    code = 0
-    try:
+    def build(plain: list[str]) -> App:
+        if len(plain) > 1 or any(a.startswith("-") for a in plain):
+            raise UsageError("bag_recorder [OUTPUT] [--ros-args -p name:=value ...]")
         recorder = BagRecorder(plain[0] if plain else None)
-        executor = SingleThreadedExecutor()
-        executor.add_node(recorder)
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-        drain(executor, recorder)
-    except UavFusionError as exc:
-        print(f"bag_recorder: error: {exc}", file=sys.stderr)
-        code = 2
-    finally:
-        if recorder is not None:
-            recorder.close()
-            recorder.destroy_node()
-        for s, h in previous.items():
-            signal.signal(s, h if h is not None else signal.SIG_DFL)
-        if rclpy.utilities.ok():
-            rclpy.shutdown()
-    return code
+
+        def on_stop(executor: Executor | None) -> None:
+            try:
+                if executor is not None and recorder.context.ok():
+                    drain(executor, recorder)
+            finally:
+                recorder.close()
+
+        return App("bag_recorder", [recorder], on_stop=on_stop)
+
+    return run_app("bag_recorder", build, argv)
 
 
 if __name__ == "__main__":

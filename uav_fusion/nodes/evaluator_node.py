@@ -31,25 +31,26 @@ import math
 import sys
 import threading
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
-from uav_fusion.conversions import (
+from uav_fusion.core.dataset import fmt_utc, load_flight
+from uav_fusion.core.errors import UavFusionError
+from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
+from uav_fusion.core.report import ReportFiles, write_report
+from uav_fusion.core.site import Site, load_site
+from uav_fusion.ros.conversions import (
     MessageError,
     is_failed_rf,
     msg_to_radar_measurement,
@@ -59,17 +60,16 @@ from uav_fusion.conversions import (
     time_from_stamp,
     time_to_ns,
 )
-from uav_fusion.core.dataset import fmt_utc, load_flight
-from uav_fusion.core.errors import UavFusionError
-from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
-from uav_fusion.core.report import ReportFiles, write_report
-from uav_fusion.core.site import Site, load_site
-from uav_fusion.nodes._diagnostics import make_status
-from uav_fusion.params import Param, declare_all, not_empty
+from uav_fusion.ros.diagnostics import make_status
+from uav_fusion.ros.params import Param, declare_all, not_empty
+from uav_fusion.ros.qos import stream_qos
+from uav_fusion.ros.runtime import run_node
 
 M = TypeVar("M")
 
 NODE_NAME = "evaluator_node"
+#: wall seconds the stop (writing the report with its figures) and teardown may take
+REPORT_GRACE_S = 120.0
 
 PARAMS: tuple[Param, ...] = (
     Param("site_file", "", "site YAML ('' = the shipped site)"),
@@ -168,9 +168,7 @@ class EvaluatorNode(Node):
         self._lock = threading.Lock()
         self.last_report: ReportFiles | None = None
 
-        qos = QoSProfile(
-            depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE
-        )
+        qos = stream_qos(depth)
         self.create_subscription(NavSatFix, self.truth_topic, self._on_truth, qos)
         self.create_subscription(
             PoseWithCovarianceStamped, self.radar_raw_topic, self._on_radar_raw, qos
@@ -421,30 +419,19 @@ def _with_dropped(ev: Evaluation, dropped: dict[str, int]) -> Evaluation:
     return replace(ev, dropped=dropped)
 
 
-def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node: EvaluatorNode | None = None
-    try:
-        node = EvaluatorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except UavFusionError as exc:
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
-        try_shutdown()
-        return 2
-    finally:
-        if node is not None:
-            node._refresh_runtime_params()
-            if node.write_on_shutdown:
-                try:
-                    files = node.write_report()
-                    print(f"{NODE_NAME}: report written to {files.folder}", file=sys.stderr)
-                except (UavFusionError, OSError) as exc:
-                    print(f"{NODE_NAME}: report not written: {exc}", file=sys.stderr)
-            node.destroy_node()
-        try_shutdown()
-    return 0
+def main(args: Sequence[str] | None = None) -> int:
+    def on_stop(node: Node, _executor: Any) -> None:
+        assert isinstance(node, EvaluatorNode)
+        node._refresh_runtime_params()
+        if node.write_on_shutdown:
+            try:
+                files = node.write_report()
+                print(f"{NODE_NAME}: report written to {files.folder}", file=sys.stderr)
+            except (UavFusionError, OSError) as exc:
+                print(f"{NODE_NAME}: report not written: {exc}", file=sys.stderr)
+
+    return run_node(EvaluatorNode, args, on_stop=on_stop, name=NODE_NAME,
+                    stop_grace_s=REPORT_GRACE_S)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@
 Creates ``truth_replay``, ``rf_replay``, ``radar_replay``, ``fusion_node`` and (unless
 disabled) ``evaluator_node`` in one rclpy context, each reading its parameters as usual
 (``--ros-args --params-file config/graph.yaml``; node names are the sections). The three
-replays hand their streams to **one** :class:`~uav_fusion.replay.ReplayDriver`, so every
+replays hand their streams to **one** :class:`~uav_fusion.ros.replay.ReplayDriver`, so every
 message is published in one global time order on one timeline, and ``/clock`` follows it.
 The timeline's settings (``rate``, ``clock_period_s``, ``batch_size``,
 ``wait_for_subscribers_s``) are ``truth_replay``'s; ``delay_s`` stays per replay.
@@ -26,20 +26,19 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import rclpy
 from rclpy.context import Context
 from rclpy.executors import Executor, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.utilities import get_default_context, remove_ros_args
+from rclpy.utilities import get_default_context
 
-from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.nodes.fusion_node import FusionNode
 from uav_fusion.nodes.radar_replay import RadarReplay
 from uav_fusion.nodes.rf_replay import RfReplay
 from uav_fusion.nodes.truth_replay import TruthReplay
-from uav_fusion.replay import ReplayDriver, ReplayNode, flight_span
+from uav_fusion.ros.replay import ReplayDriver, ReplayNode, flight_span
+from uav_fusion.ros.runtime import EXIT_FAILED, EXIT_OK, App, UsageError, run_app
 
 Overrides = dict[str, dict[str, Any]]
 
@@ -106,6 +105,8 @@ class Graph:
         self._lost_offset = (0, 0)  # messages declared lost (fusion, evaluator)
         self._stall: tuple[tuple[int, int], float] | None = None
         self.loss_detected = False
+        #: polled by the run loops: True stops them (the runtime's signal flag)
+        self.stop_requested: Callable[[], bool] = lambda: False
         self.driver = ReplayDriver(
             self.truth,
             rate=self.rate,
@@ -196,7 +197,7 @@ class Graph:
     def spin_until(self, cond: Callable[[], bool], timeout_s: float) -> bool:
         end = time.monotonic() + timeout_s
         while not cond():
-            if time.monotonic() > end or not self.context.ok():
+            if time.monotonic() > end or not self.context.ok() or self.stop_requested():
                 return False
             self.executor.spin_once(timeout_sec=0.02)
         return True
@@ -244,7 +245,7 @@ class Graph:
         last, since = count(), time.monotonic()
         while not caught_up():
             now = time.monotonic()
-            if now > end or not self.context.ok():
+            if now > end or not self.context.ok() or self.stop_requested():
                 return False
             n = count()
             if n != last:
@@ -291,35 +292,38 @@ class Graph:
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    argv = list(sys.argv if args is None else args)
     parser = argparse.ArgumentParser(prog="graph", description=__doc__.split("\n")[0])
     parser.add_argument("--threads", type=int, default=1, help="executor threads (default 1)")
     parser.add_argument("--no-evaluator", action="store_true", help="leave the evaluator out")
     parser.add_argument("--timeout", type=float, default=3600.0, help="give up after seconds")
-    opts = parser.parse_args(remove_ros_args(argv)[1:])
-    rclpy.init(args=argv)
-    graph: Graph | None = None
-    try:
+
+    def build(plain: list[str]) -> App:
+        try:
+            opts = parser.parse_args(plain)
+        except SystemExit:
+            raise UsageError(parser.format_usage().strip()) from None
         graph = Graph(evaluator=not opts.no_evaluator, threads=opts.threads)
-        res = graph.run(timeout_s=opts.timeout)
-        log = graph.truth.get_logger()
-        if not res.ok:
-            log.error(res.message)
-            return 1
-        log.info(
-            f"done in {res.wall_s:.1f} s: published {res.published}, {res.steps} filter steps"
-            + (f"; report in {res.report}" if res.report else "")
-        )
-        return 0
-    except UavFusionError as exc:
-        print(f"graph: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-    finally:
-        if graph is not None:
-            graph.destroy()
-        rclpy.utilities.try_shutdown()
+
+        def run(stop_requested: Callable[[], bool]) -> int:
+            graph.stop_requested = stop_requested
+            res = graph.run(timeout_s=opts.timeout)
+            log = graph.truth.get_logger()
+            if stop_requested():
+                log.info("stopped by a signal before the replay finished")
+                return EXIT_OK
+            if not res.ok:
+                log.error(res.message)
+                return EXIT_FAILED
+            log.info(
+                f"done in {res.wall_s:.1f} s: published {res.published}, "
+                f"{res.steps} filter steps" + (f"; report in {res.report}" if res.report else "")
+            )
+            return EXIT_OK
+
+        return App("graph", list(graph.nodes), run=run, executor=graph.executor,
+                   extra={"threads": opts.threads})
+
+    return run_app("graph", build, args)
 
 
 if __name__ == "__main__":

@@ -4,16 +4,14 @@ Two streams (see ``docs/graph.md``):
 
 - ``radar/pose``: the reports the track-selection policy keeps, exactly the radar
   measurements the offline runner feeds the estimator
-  (:func:`uav_fusion.core.estimator.flight_measurements`); with the paper's policy
-  (``largest_track``) that is the largest continuous track, chosen with knowledge of the
-  whole flight like the paper did. Candidates of one radar frame share one stamp.
+  (:func:`uav_fusion.core.radar_choice.selected_radar`); with the paper's policy
+  (``largest_track``) that is the largest continuous track. Candidates of one radar frame
+  share one stamp.
 - ``radar/raw``: every UAV report of every frame, before selection (the evaluator's
-  "radar raw" row): the reports of the tracks whose mean ``catProb[0]`` reaches the profile's
-  ``evaluation.raw_radar_min_mean_uav_prob`` (:mod:`uav_fusion.core.radar_class`; every
-  report when that is null).
+  "radar raw" row, :func:`uav_fusion.core.radar_choice.raw_radar_reports`).
 
 Covariance: the measurement's own R, else the profile's radar R. Stamps: the radar frame's
-UTC time. Parameters: :func:`uav_fusion.replay.replay_params` plus ``profile``,
+UTC time. Parameters: :func:`uav_fusion.ros.replay.replay_params` plus ``profile``,
 ``track_selection``, ``radar_topic``, ``radar_raw_topic``.
 """
 
@@ -26,32 +24,13 @@ from typing import Any
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.publisher import Publisher
 
-from uav_fusion import conversions as cv
-from uav_fusion.core.estimator import Profile, flight_measurements, load_profile
 from uav_fusion.core.estimator.profile import SELECTIONS
-from uav_fusion.core.radar_class import uav_class_tracks
-from uav_fusion.core.records import RADAR, Flight, Measurement, RadarTrack
-from uav_fusion.core.site import Site
-from uav_fusion.params import Param
-from uav_fusion.replay import ReplayNode, run_replay, topic_param
+from uav_fusion.core.radar_choice import radar_profile, raw_radar_reports, selected_radar
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.params import Param
+from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
 
 NODE_NAME = "radar_replay"
-
-
-def selected_radar(flight: Flight, profile: Profile, site: Site) -> list[list[Measurement]]:
-    """The radar frames (lists of candidates, in order) the offline runner would feed."""
-    frames: list[list[Measurement]] = []
-    for item in flight_measurements(flight, profile, site):
-        group = list(item) if isinstance(item, list) else [item]
-        radar = [m for m in group if m.source == RADAR]
-        if radar:
-            frames.append(radar)
-    return frames
-
-
-def uav_class_reports(flight: Flight, profile: Profile) -> list[RadarTrack]:
-    """The UAV reports of the raw radar row (the profile's per-track mean rule)."""
-    return uav_class_tracks(flight.radar, profile.raw_radar_min_mean_uav_prob)
 
 
 class RadarReplay(ReplayNode):
@@ -75,11 +54,7 @@ class RadarReplay(ReplayNode):
             ],
             **kwargs,
         )
-        profile = load_profile(str(self.p["profile"]))
-        sel = str(self.p["track_selection"])
-        if sel != "profile" and sel != profile.radar_selection:
-            profile = profile.with_changes(radar_selection=sel)
-        self.profile = profile
+        self.profile = radar_profile(str(self.p["profile"]), str(self.p["track_selection"]))
         self.pub = self.create_publisher(PoseWithCovarianceStamped, self.p["radar_topic"], self.qos)
         self.pub_raw = (
             self.create_publisher(PoseWithCovarianceStamped, self.p["radar_raw_topic"], self.qos)
@@ -98,14 +73,14 @@ class RadarReplay(ReplayNode):
         if self.pub_raw is not None:
             raw = [
                 (trk.t, cv.radar_track_to_msg(trk, R, self.frame_id))
-                for trk in uav_class_reports(self.flight, self.profile)
+                for trk in raw_radar_reports(self.flight, self.profile)
             ]
             out.append((self.pub_raw, raw))
         return out
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_replay(RadarReplay, args)
+    return run_replay(RadarReplay, args, NODE_NAME)
 
 
 if __name__ == "__main__":

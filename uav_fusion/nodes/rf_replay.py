@@ -2,7 +2,7 @@
 
 Topic ``rf/fix``: x = east, y = north (ENU metres, site frame), z = 0.0; a failed attempt
 is published as x = y = z = NaN so subscribers can count attempts. Stamps are the sensor's
-UTC times. Parameters: see :func:`uav_fusion.replay.replay_params` and ``docs/graph.md``.
+UTC times. Parameters: see :func:`uav_fusion.ros.replay.replay_params` and ``docs/graph.md``.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from typing import Any
 from geometry_msgs.msg import PointStamped
 from rclpy.publisher import Publisher
 
-from uav_fusion.conversions import rf_attempt_to_msg
-from uav_fusion.replay import ReplayNode, run_replay, topic_param
+from uav_fusion.ros.conversions import rf_attempt_to_msg
+from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
 
 NODE_NAME = "rf_replay"
 
@@ -37,7 +37,7 @@ class RfReplay(ReplayNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_replay(RfReplay, args)
+    return run_replay(RfReplay, args, NODE_NAME)
 
 
 if __name__ == "__main__":

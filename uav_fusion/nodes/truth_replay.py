@@ -2,7 +2,7 @@
 
 By default this replay drives the shared timeline: it publishes ``/clock`` (sensor UTC time)
 so that ``radar_replay`` and ``rf_replay`` started with ``use_sim_time:=true`` follow it.
-Parameters: see :func:`uav_fusion.replay.replay_params` and ``docs/graph.md``.
+Parameters: see :func:`uav_fusion.ros.replay.replay_params` and ``docs/graph.md``.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from typing import Any
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import NavSatFix
 
-from uav_fusion.conversions import truth_to_navsatfix
-from uav_fusion.replay import ReplayNode, run_replay, topic_param
+from uav_fusion.ros.conversions import truth_to_navsatfix
+from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
 
 NODE_NAME = "truth_replay"
 
@@ -41,7 +41,7 @@ class TruthReplay(ReplayNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_replay(TruthReplay, args)
+    return run_replay(TruthReplay, args, NODE_NAME)
 
 
 if __name__ == "__main__":

@@ -75,6 +75,7 @@ _UPD_KEY = {RADAR: "updated_radar", RF: "updated_rf"}
 # a step's state: x (6 values) then the upper triangle of P (21 values), as packed doubles
 _STATE = struct.Struct("27d")
 _pack_state = _STATE.pack
+_UNPACK = _STATE.unpack
 _NAN_STATE = _pack_state(*(math.nan,) * 27)
 
 
@@ -144,6 +145,12 @@ class Step:
         if self._P is None:
             self._P = expand_upper(np.frombuffer(self._state, dtype=float, count=21, offset=48))
         return self._P
+
+    @property
+    def values(self) -> tuple[float, ...]:
+        """The 27 packed doubles as Python floats: x (6), then P's upper triangle (21, row by
+        row, :data:`~uav_fusion.core.estimator.kalman.UPPER_INDEX`); no arrays built."""
+        return _UNPACK(self._state)
 
     @property
     def updated(self) -> bool:
@@ -226,6 +233,14 @@ class FusionEstimator:
         self.active = False
         self.tentative = False
         self.consecutive_rejections = 0
+
+    def restart_timeline(self, reason: str) -> None:
+        """The input's time starts over (a bag loop, a clock jumping back): drop the track
+        like :meth:`reset` and forget the current time, so earlier stamps than the last one
+        seen are not "out of order"."""
+        self.reset(reason)
+        self.t = None
+        self.last_used_t = None
 
     def state(self) -> tuple[FloatArray, FloatArray] | None:
         """Current (x, P), or None without a track."""

@@ -37,18 +37,29 @@ truth NavSatFix with status NO_FIX)) so nodes can count drops.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
-from nav_msgs.msg import Odometry
+from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 
 from uav_fusion.core.dataset.radar import H_MAX, H_MIN
-from uav_fusion.core.errors import UavFusionError
+from uav_fusion.core.encoding import (
+    UNKNOWN_VARIANCE,
+    MessageError,
+    fix_type_from_status,
+    navsat_status,
+    ns_to_time,
+    pose_covariance,
+    rf_point,
+    stamp_parts,
+    time_to_ns,
+)
 from uav_fusion.core.records import (
     RADAR,
     RF,
@@ -61,8 +72,6 @@ from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Variance (rad^2, or (rad/s)^2) written for components that are not estimated.
-UNKNOWN_VARIANCE = 1.0e6
 #: Relative tolerance of the symmetry check on incoming covariance blocks.
 SYMMETRY_RTOL = 1.0e-9
 #: Largest plausible ENU coordinate (m) of an incoming position: 10 000 km, far beyond any
@@ -75,13 +84,12 @@ TRUTH_H_MIN, TRUTH_H_MAX = H_MIN, H_MAX
 
 _NS = 1_000_000_000
 
-
-class MessageError(UavFusionError):
-    """An incoming message cannot be used; ``reason`` is a short key for drop counters."""
-
-    def __init__(self, reason: str, what: str) -> None:
-        self.reason = reason
-        super().__init__(f"{reason}: {what}")
+__all__ = [
+    "UNKNOWN_VARIANCE",
+    "MessageError",
+    "ns_to_time",
+    "time_to_ns",
+]
 
 
 class StepLike(Protocol):
@@ -102,14 +110,8 @@ class StepLike(Protocol):
 
 def stamp_from_time(t: float) -> Time:
     """UTC float seconds -> ``builtin_interfaces/Time`` (nearest nanosecond)."""
-    if not math.isfinite(t) or t < 0.0:
-        raise MessageError("bad_stamp", f"time {t!r} cannot be a ROS stamp")
-    sec = math.floor(t)
-    frac = t - sec  # exact for floats
-    nsec = round(frac * _NS)
-    if nsec >= _NS:
-        sec, nsec = sec + 1, nsec - _NS
-    return Time(sec=int(sec), nanosec=int(nsec))
+    sec, nsec = stamp_parts(t)
+    return Time(sec=sec, nanosec=nsec)
 
 
 def time_from_stamp(stamp: Time) -> float:
@@ -117,26 +119,13 @@ def time_from_stamp(stamp: Time) -> float:
     return float(stamp.sec) + float(stamp.nanosec) / _NS
 
 
-def time_to_ns(t: float) -> int:
-    """UTC float seconds -> integer nanoseconds (the rclpy clock's unit)."""
-    s = stamp_from_time(t)
-    return int(s.sec) * _NS + int(s.nanosec)
-
-
-def ns_to_time(ns: int) -> float:
-    """Integer nanoseconds -> UTC float seconds."""
-    sec, nsec = divmod(int(ns), _NS)
-    return float(sec) + float(nsec) / _NS
-
-
 def _check_stamp(stamp: Time) -> float:
-    if stamp.sec == 0 and stamp.nanosec == 0:
+    sec, nsec = stamp.sec, stamp.nanosec
+    if sec == 0 and nsec == 0:
         raise MessageError("zero_stamp", "message has no stamp (0)")
-    if stamp.sec < 0 or stamp.nanosec >= _NS:
-        raise MessageError(
-            "bad_stamp", f"stamp sec={stamp.sec}, nanosec={stamp.nanosec} is not a UTC time"
-        )
-    return time_from_stamp(stamp)
+    if sec < 0 or nsec >= _NS:
+        raise MessageError("bad_stamp", f"stamp sec={sec}, nanosec={nsec} is not a UTC time")
+    return float(sec) + float(nsec) / _NS
 
 
 def _check_position(z: FloatArray, what: str) -> None:
@@ -153,29 +142,53 @@ def _check_frame(frame_id: str, expected: str | None) -> None:
         raise MessageError("wrong_frame", f"frame '{frame_id}', expected '{expected}'")
 
 
-def _check_cov_block(c: FloatArray, what: str) -> None:
-    if not np.all(np.isfinite(c)):
+def check_cov3(
+    c00: float, c01: float, c02: float,
+    c10: float, c11: float, c12: float,
+    c20: float, c21: float, c22: float,
+    what: str,
+) -> None:
+    """Raise :class:`MessageError` unless the 3x3 covariance is finite, symmetric (to
+    :data:`SYMMETRY_RTOL` of its largest entry) and positive definite.
+
+    Plain float arithmetic, cheapest test first: finiteness, symmetry, then one Cholesky
+    factorisation of the lower triangle (the test ``numpy.linalg.cholesky`` makes), which
+    fails at the first pivot that is not > 0.
+    """
+    isf = math.isfinite
+    if not (isf(c00) and isf(c01) and isf(c02) and isf(c10) and isf(c11) and isf(c12)
+            and isf(c20) and isf(c21) and isf(c22)):
         raise MessageError("bad_covariance", f"{what} covariance has non-finite entries")
-    if float(np.max(np.abs(c))) > MAX_VARIANCE_M2:
+    scale = max(abs(c00), abs(c01), abs(c02), abs(c10), abs(c11), abs(c12), abs(c20),
+                abs(c21), abs(c22)) or 1.0
+    if scale > MAX_VARIANCE_M2:
         raise MessageError(
             "bad_covariance", f"{what} covariance has entries beyond {MAX_VARIANCE_M2:g} m^2"
         )
-    scale = float(np.max(np.abs(c))) or 1.0
-    if not np.allclose(c, c.T, rtol=0.0, atol=SYMMETRY_RTOL * scale):
+    tol = SYMMETRY_RTOL * scale
+    if abs(c01 - c10) > tol or abs(c02 - c20) > tol or abs(c12 - c21) > tol:
         raise MessageError("bad_covariance", f"{what} covariance is not symmetric")
-    try:
-        np.linalg.cholesky(c)
-    except np.linalg.LinAlgError:
-        raise MessageError(
-            "bad_covariance", f"{what} covariance is not positive definite"
-        ) from None
+    ok = c00 > 0.0
+    if ok:
+        l00 = math.sqrt(c00)
+        l10 = c10 / l00
+        l20 = c20 / l00
+        d1 = c11 - l10 * l10
+        ok = d1 > 0.0
+        if ok:
+            l21 = (c21 - l20 * l10) / math.sqrt(d1)
+            ok = c22 - l20 * l20 - l21 * l21 > 0.0
+    if not ok:
+        raise MessageError("bad_covariance", f"{what} covariance is not positive definite")
 
 
-def _pose_cov(pos: FloatArray) -> list[float]:
-    cov = np.zeros((6, 6))
-    cov[:3, :3] = pos
-    cov[3, 3] = cov[4, 4] = cov[5, 5] = UNKNOWN_VARIANCE
-    return [float(v) for v in cov.reshape(-1)]
+def _check_cov_block(c: FloatArray, what: str) -> None:
+    (a, b, d), (e, f, g), (h, i, j) = np.asarray(c, dtype=float).tolist()
+    check_cov3(a, b, d, e, f, g, h, i, j, what)
+
+
+def _pose_cov(pos: FloatArray) -> FloatArray:
+    return np.array(pose_covariance(pos.tolist()), dtype=np.float64)
 
 
 # --- radar --------------------------------------------------------------------------------
@@ -225,16 +238,27 @@ def msg_to_radar_measurement(
     Raises :class:`MessageError` on a zero stamp, wrong frame, non-finite position or a
     position covariance that is not finite, symmetric and positive definite.
     """
-    t = _check_stamp(msg.header.stamp)
-    _check_frame(msg.header.frame_id, expected_frame)
-    p = msg.pose.pose.position
-    z = np.array([p.x, p.y, p.z], dtype=float)
-    _check_position(z, "radar position")
-    cov = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
-    R = np.array(cov[:3, :3])
-    _check_cov_block(R, "radar position")
-    R = 0.5 * (R + R.T)  # exactly symmetric (the check allows rounding-size differences)
-    return Measurement(t=t, source=RADAR, z=z, R=R, seq=seq)
+    header = msg.header
+    t = _check_stamp(header.stamp)
+    if expected_frame and header.frame_id != expected_frame:
+        _check_frame(header.frame_id, expected_frame)
+    pose = msg.pose
+    p = pose.pose.position
+    x, y, zz = p.x, p.y, p.z
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(zz)):
+        raise MessageError("nan", "radar position is not finite")
+    if max(abs(x), abs(y), abs(zz)) > MAX_ABS_ENU_M:
+        raise MessageError(
+            "out_of_range",
+            f"radar position {[x, y, zz]} lies beyond {MAX_ABS_ENU_M:g} m of the origin",
+        )
+    c = pose.covariance[:15].tolist()
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = c[0:3] + c[6:9] + c[12:15]
+    check_cov3(c00, c01, c02, c10, c11, c12, c20, c21, c22, "radar position")
+    # exactly symmetric (the check allows rounding-size differences)
+    s01, s02, s12 = 0.5 * (c01 + c10), 0.5 * (c02 + c20), 0.5 * (c12 + c21)
+    R = np.array(((c00, s01, s02), (s01, c11, s12), (s02, s12, c22)))
+    return Measurement(t=t, source=RADAR, z=np.array((x, y, zz)), R=R, seq=seq)
 
 
 # --- RF -----------------------------------------------------------------------------------
@@ -254,8 +278,11 @@ def rf_to_msg(t: float, en: tuple[float, float] | None, frame_id: str) -> PointS
 
 def rf_attempt_to_msg(a: RfAttempt, frame_id: str) -> PointStamped:
     """An RF localisation attempt (failed ones included) as a point."""
-    ok = a.ok and math.isfinite(a.e) and math.isfinite(a.n)
-    return rf_to_msg(a.t, (a.e, a.n) if ok else None, frame_id)
+    msg = PointStamped()
+    msg.header.stamp = stamp_from_time(a.t)
+    msg.header.frame_id = frame_id
+    msg.point.x, msg.point.y, msg.point.z = rf_point(a)
+    return msg
 
 
 def rf_measurement_to_msg(m: Measurement, frame_id: str) -> PointStamped:
@@ -282,36 +309,25 @@ def msg_to_rf_measurement(
 
     Raises :class:`MessageError` on a zero stamp, wrong frame or partly non-finite point.
     """
-    t = _check_stamp(msg.header.stamp)
-    _check_frame(msg.header.frame_id, expected_frame)
-    if is_failed_rf(msg):
+    header = msg.header
+    t = _check_stamp(header.stamp)
+    if expected_frame and header.frame_id != expected_frame:
+        _check_frame(header.frame_id, expected_frame)
+    pt = msg.point
+    x, y = pt.x, pt.y
+    if math.isnan(x) and math.isnan(y) and math.isnan(pt.z):
         return None
-    z = np.array([msg.point.x, msg.point.y], dtype=float)
-    if not np.all(np.isfinite(z)):
+    if not (math.isfinite(x) and math.isfinite(y)):
         raise MessageError("nan", "RF fix is partly non-finite")
-    _check_position(z, "RF fix")
-    return Measurement(t=t, source=RF, z=z, R=None if R is None else np.array(R), seq=seq)
+    if max(abs(x), abs(y)) > MAX_ABS_ENU_M:
+        raise MessageError(
+            "out_of_range", f"RF fix {[x, y]} lies beyond {MAX_ABS_ENU_M:g} m of the origin"
+        )
+    return Measurement(t=t, source=RF, z=np.array((x, y)), R=None if R is None else np.array(R),
+                       seq=seq)
 
 
 # --- truth --------------------------------------------------------------------------------
-
-
-def _status_from_fix_type(fix_type: int) -> int:
-    if fix_type >= 5:
-        return int(NavSatStatus.STATUS_GBAS_FIX)
-    if fix_type == 4:
-        return int(NavSatStatus.STATUS_SBAS_FIX)
-    if fix_type >= 2:
-        return int(NavSatStatus.STATUS_FIX)
-    return int(NavSatStatus.STATUS_NO_FIX)
-
-
-def _fix_type_from_status(status: int) -> int:
-    return {
-        int(NavSatStatus.STATUS_GBAS_FIX): 5,
-        int(NavSatStatus.STATUS_SBAS_FIX): 4,
-        int(NavSatStatus.STATUS_FIX): 3,
-    }.get(int(status), 0)
 
 
 def truth_to_navsatfix(fix: TruthFix, frame_id: str) -> NavSatFix:
@@ -319,7 +335,7 @@ def truth_to_navsatfix(fix: TruthFix, frame_id: str) -> NavSatFix:
     msg = NavSatFix()
     msg.header.stamp = stamp_from_time(fix.t)
     msg.header.frame_id = frame_id
-    msg.status.status = _status_from_fix_type(fix.fix_type)
+    msg.status.status = navsat_status(fix.fix_type)
     msg.status.service = int(NavSatStatus.SERVICE_GPS)
     msg.latitude, msg.longitude, msg.altitude = float(fix.lat), float(fix.lon), float(fix.h)
     msg.position_covariance_type = int(NavSatFix.COVARIANCE_TYPE_UNKNOWN)
@@ -350,7 +366,7 @@ def navsatfix_to_truth(msg: NavSatFix, site: Site) -> TruthFix:
         n=float(n),
         u=float(u),
         vel_ned=(nan, nan, nan),
-        fix_type=_fix_type_from_status(msg.status.status),
+        fix_type=fix_type_from_status(msg.status.status),
         num_sats=0,
     )
 
@@ -375,6 +391,82 @@ def state_to_odometry(
     lin = msg.twist.twist.linear
     lin.x, lin.y, lin.z = float(xv[3]), float(xv[4]), float(xv[5])
     msg.twist.covariance = _pose_cov(Pm[3:, 3:])
+    return msg
+
+
+def odometry_from_values(
+    t: float, v: Sequence[float], frame_id: str, child_frame_id: str
+) -> Odometry:
+    """Odometry from a step's packed values (x[0:6], then P's 21-entry upper triangle,
+    :attr:`uav_fusion.core.estimator.Step.values`): the message :func:`state_to_odometry`
+    builds, without building the 6x6 arrays."""
+    u = UNKNOWN_VARIANCE
+    msg = Odometry()
+    h = msg.header
+    h.stamp = stamp_from_time(t)
+    h.frame_id = frame_id
+    msg.child_frame_id = child_frame_id
+    pose = msg.pose
+    pos = pose.pose.position
+    pos.x, pos.y, pos.z = v[0], v[1], v[2]
+    pose.pose.orientation.w = 1.0
+    # upper-triangle indices (offset 6): P00 0, P01 1, P02 2, P11 6, P12 7, P22 11
+    p00, p01, p02, p11, p12, p22 = v[6], v[7], v[8], v[12], v[13], v[17]
+    pose.covariance = np.array((
+        p00, p01, p02, 0.0, 0.0, 0.0, p01, p11, p12, 0.0, 0.0, 0.0,
+        p02, p12, p22, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0,
+        0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u,
+    ))
+    twist = msg.twist
+    lin = twist.twist.linear
+    lin.x, lin.y, lin.z = v[3], v[4], v[5]
+    # P33 15, P34 16, P35 17, P44 18, P45 19, P55 20
+    q00, q01, q02, q11, q12, q22 = v[21], v[22], v[23], v[24], v[25], v[26]
+    twist.covariance = np.array((
+        q00, q01, q02, 0.0, 0.0, 0.0, q01, q11, q12, 0.0, 0.0, 0.0,
+        q02, q12, q22, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0,
+        0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u,
+    ))
+    return msg
+
+
+def navsatfix_from_enu(
+    t: float, lat: float, lon: float, h: float, v: Sequence[float], frame_id: str
+) -> NavSatFix:
+    """A fused position as NavSatFix: latitude/longitude (deg), altitude HAE (m), position
+    covariance = P's position block (ENU, NavSatFix's convention; type KNOWN), status FIX,
+    no GNSS service (it is not a satellite fix). ``v`` as in :func:`odometry_from_values`."""
+    msg = NavSatFix()
+    msg.header.stamp = stamp_from_time(t)
+    msg.header.frame_id = frame_id
+    msg.status.status = int(NavSatStatus.STATUS_FIX)
+    msg.status.service = 0
+    msg.latitude, msg.longitude, msg.altitude = lat, lon, h
+    p00, p01, p02, p11, p12, p22 = v[6], v[7], v[8], v[12], v[13], v[17]
+    msg.position_covariance = np.array((p00, p01, p02, p01, p11, p12, p02, p12, p22))
+    msg.position_covariance_type = int(NavSatFix.COVARIANCE_TYPE_KNOWN)
+    return msg
+
+
+def path_from_points(
+    points: Iterable[tuple[float, float, float, float]], frame_id: str
+) -> Path:
+    """nav_msgs/Path of (t, east, north, up) points in ``frame_id`` (orientation identity);
+    the path's stamp is the last point's."""
+    msg = Path()
+    msg.header.frame_id = frame_id
+    poses = []
+    for t, e, n, u in points:
+        ps = PoseStamped()
+        ps.header.stamp = stamp_from_time(t)
+        ps.header.frame_id = frame_id
+        pos = ps.pose.position
+        pos.x, pos.y, pos.z = e, n, u
+        ps.pose.orientation.w = 1.0
+        poses.append(ps)
+    msg.poses = poses
+    if poses:
+        msg.header.stamp = poses[-1].header.stamp
     return msg
 
 

@@ -6,16 +6,13 @@ go into the ROS descriptor (``FloatingPointRange`` / ``IntegerRange``, visible t
 ``--ros-args -p`` or a ``--params-file``) and at run time (``set_parameters`` returns
 ``successful=False`` with the reason). Choices and other checks that a range cannot express
 are enforced by an on-set callback installed here. A bad value at start-up raises
-:class:`ParamError` naming the parameter, the value and what is allowed; node ``main()``
-functions log it and exit with status 2.
+:class:`ParamError` naming the parameter, the value and what is allowed; the node runtime
+(:mod:`uav_fusion.ros.runtime`) logs it and exits with status 2.
 """
 
 from __future__ import annotations
 
 import math
-import os
-import sys
-import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -30,7 +27,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from uav_fusion.core.errors import ConfigError, UavFusionError
+from uav_fusion.core.errors import ConfigError
 
 Check = Callable[[Any], str | None]  # returns an error text, or None if the value is fine
 
@@ -138,70 +135,3 @@ def positive(value: Any) -> str | None:
 def not_empty(value: Any) -> str | None:
     """A check: the string must not be empty (topic names, frames)."""
     return None if str(value).strip() else "must not be empty"
-
-
-SHUTDOWN_GRACE_S = 10.0
-
-
-def _exit_after_stuck_shutdown() -> None:
-    print(
-        f"warning: middleware shutdown did not finish within {SHUTDOWN_GRACE_S:g} s; exiting",
-        file=sys.stderr,
-        flush=True,
-    )
-    os._exit(0)
-
-
-def run_node(
-    factory: Callable[..., Node],
-    args: Sequence[str] | None = None,
-    *,
-    setup: Callable[[Node], None] | None = None,
-    done: Callable[[Node], bool] | None = None,
-) -> int:
-    """Shared ``main()`` of the nodes: init, build, spin until shutdown (or ``done``).
-
-    A :class:`~uav_fusion.core.errors.UavFusionError` while building (bad parameter, missing
-    file, unreadable data) is logged and gives exit status 2, never a traceback.
-    """
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-    from rclpy.utilities import ok, try_shutdown
-
-    rclpy.init(args=None if args is None else list(args))
-    node: Node | None = None
-    try:
-        try:
-            node = factory()
-            if setup is not None:
-                setup(node)
-        except UavFusionError as exc:
-            rclpy.logging.get_logger("uav_fusion").error(str(exc))
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while ok():
-            try:
-                executor.spin_once(timeout_sec=0.1)
-            except RuntimeError:
-                # A signal shut the context down while a message was being taken (rclpy
-                # then fails inside take_message): that is a normal stop, not a crash.
-                if ok():
-                    raise
-                break
-            if done is not None and done(node):
-                break
-        return 0
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
-    finally:
-        # Bound the middleware's teardown: a node asked to stop must stop, even if DDS
-        # hangs while its peers vanish at the same moment.
-        guard = threading.Timer(SHUTDOWN_GRACE_S, _exit_after_stuck_shutdown)
-        guard.daemon = True
-        guard.start()
-        if node is not None:
-            node.destroy_node()
-        try_shutdown()
-        guard.cancel()

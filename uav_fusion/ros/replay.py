@@ -37,30 +37,16 @@ from rclpy.clock_type import ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from uav_fusion.conversions import ns_to_time, stamp_from_time
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site, load_site
-from uav_fusion.params import Param, declare_all, not_empty, run_node
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
-
-
-def stream_qos(depth: int) -> QoSProfile:
-    """QoS of every replay and fusion stream: reliable, keep last ``depth``, volatile."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=depth,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.VOLATILE,
-    )
-
-
-CLOCK_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
-)
+from uav_fusion.ros.conversions import ns_to_time, stamp_from_time
+from uav_fusion.ros.params import Param, declare_all, not_empty
+from uav_fusion.ros.qos import CLOCK_QOS, stream_qos
+from uav_fusion.ros.runtime import run_node
 
 
 def replay_params(publish_clock: bool) -> list[Param]:
@@ -419,19 +405,22 @@ class ReplayNode(Node):
         self.finished = True
 
 
-def run_replay(factory: Callable[..., ReplayNode], args: Sequence[str] | None = None) -> int:
+def run_replay(
+    factory: Callable[..., ReplayNode], args: Sequence[str] | None = None, name: str = "replay"
+) -> int:
     """``main()`` body of a replay node: start, spin, stop cleanly; 2 on a bad set-up."""
 
-    def setup(node: Node) -> None:
+    def start(node: Node) -> None:
         assert isinstance(node, ReplayNode)
         node.start_standalone()
 
-    def done(node: Node) -> bool:
+    def finished(node: Node) -> bool:
         assert isinstance(node, ReplayNode)
-        if node.finished and node.p["exit_when_done"]:
-            assert node.driver is not None
-            node.driver.wait_acked(5.0)
-            return True
-        return False
+        return node.finished and bool(node.p["exit_when_done"])
 
-    return run_node(factory, args, setup=setup, done=done)
+    def on_stop(node: Node, _executor: Any) -> None:
+        assert isinstance(node, ReplayNode)
+        if node.finished and node.driver is not None and node.context.ok():
+            node.driver.wait_acked(5.0)
+
+    return run_node(factory, args, start=start, finished=finished, on_stop=on_stop, name=name)
