@@ -69,10 +69,18 @@ def _rclpy_stream() -> list[tuple[str, int, bytes]]:
     ]
 
 
+def _bundled_count() -> int:
+    """The message count the bundled bag's metadata.yaml states (the same flight)."""
+    import yaml
+
+    meta = yaml.safe_load((ROOT / "bags" / "default_flight" / "metadata.yaml").read_text())
+    return int(meta["rosbag2_bagfile_information"]["message_count"])
+
+
 def _check(ours: list[tuple[str, int, bytes]], theirs: list[tuple[str, int, bytes]]) -> int:
     ts = jazzy_typestore()
     types = {topic_name("", leaf): t for leaf, t in TYPES.items()}
-    assert len(ours) == len(theirs) == 9391
+    assert len(ours) == len(theirs) == _bundled_count()
     exact = 0
     for (ta, sa, da), (tb, sb, db) in zip(ours, theirs, strict=True):
         assert (ta, sa) == (tb, sb)
@@ -86,8 +94,9 @@ def test_converter_bytes_equal_rclpy_serialisation(tmp_path: Path) -> None:
     flight = load_flight(data_path(DEFAULT_FLIGHT), site)
     convert_flight(flight, site, tmp_path / "bag")
     ours = _read(tmp_path / "bag")
-    exact = _check(ours, _rclpy_stream())
-    assert exact > 0  # most messages have no padding left uninitialised
+    # how many are byte-identical including the padding depends on what rclpy's allocator
+    # left there (in a busy test process: often none), so only the padding rule is asserted
+    _check(ours, _rclpy_stream())
 
 
 def test_converter_bytes_equal_the_bundled_bag(tmp_path: Path) -> None:
