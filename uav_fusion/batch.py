@@ -131,9 +131,11 @@ class Engine:
         items: Sequence[T],
         label: str = "tasks",
         describe: Callable[[T], str] = str,
+        on_result: Callable[[int, R], None] | None = None,
     ) -> list[R]:
         """``[fn(item) for item in items]``, in parallel; the first failure stops the rest
-        and is raised (with a note naming the item)."""
+        and is raised (with a note naming the item). ``on_result(i, result)`` is called as
+        each task finishes (in completion order), e.g. to save results as they come."""
         if not items:
             return []
         if self._client is None:
@@ -152,6 +154,8 @@ class Engine:
                 except Exception as exc:
                     exc.add_note(f"in {label} task {describe(items[i])}")
                     raise
+                if on_result is not None:
+                    on_result(i, results[i])
                 if bar is not None:
                     bar.update()
         finally:

@@ -19,6 +19,7 @@ COMMANDS: dict[str, str] = {
     "convert": "convert",
     "demo": "demo",
     "bench": "bench",
+    "sweep": "sweep",
 }
 
 

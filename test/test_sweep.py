@@ -1,0 +1,153 @@
+"""``uav_fusion sweep``: spec checks, failure isolation, re-runs that compute only what is
+missing, and results keyed by the tasks' inputs."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from uav_fusion.cli import main
+from uav_fusion.core.bench.sweep import load_spec, run_sweep_task, sweep_tasks
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.site import load_site
+from uav_fusion.resources import DEFAULT_SITE, config_path
+
+SITE_FILE = config_path(DEFAULT_SITE)
+
+
+def _write(path: Path, doc: object) -> Path:
+    path.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    return path
+
+
+def _setup(tmp_path: Path, **changes: object) -> Path:
+    """A 40 s two-flight definition and a sweep of q over it with the paper profile."""
+    definition = _write(
+        tmp_path / "tiny.yaml",
+        {
+            "name": "tiny",
+            "plans": ["zigzag_dash", "hover_notch"],
+            "splits": {"tune": [3, 4], "test": [5]},
+            "duration_s": 40.0,
+        },
+    )
+    spec: dict[str, object] = {
+        "name": "tiny_q",
+        "definition": str(definition),
+        "split": "tune",
+        "plans": ["zigzag_dash"],
+        "profiles": ["paper"],
+        "parameters": {"q": [1.0, 4.0]},
+    }
+    spec.update(changes)
+    return _write(tmp_path / "spec.yaml", spec)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"parameters": {"qq": [1.0]}}, r"spec.yaml: parameters.qq: unknown parameter"),
+        ({"profiles": ["no_such_profile"]}, r"spec.yaml: profiles: unknown profile 'no_such"),
+        ({"plans": ["no_such_plan"]}, r"spec.yaml: plans: unknown plan 'no_such_plan'"),
+        ({"seeds": [5]}, r"spec.yaml: seeds: seed 5 is not in the tune half"),
+        ({"colour": "red"}, r"spec.yaml: unknown key\(s\) colour"),
+        ({"split": "train"}, r"spec.yaml: split: one of tune, test expected"),
+        ({"parameters": {"q": "fast"}}, r"spec.yaml: parameters.q: a non-empty list"),
+        ({"parameters": {"nis_probability": [0.9, "high"]}}, r"parameters.nis_probability: a "),
+        ({"parameters": {"q": [-1.0]}}, r"spec.yaml: parameters \{'q': .*motion.q must be"),
+        ({"metric": "happiness"}, r"spec.yaml: metric: one of"),
+    ],
+)
+def test_bad_specs_stop_with_the_file_and_key(
+    tmp_path: Path, changes: dict[str, object], message: str
+) -> None:
+    with pytest.raises(ConfigError, match=message):
+        load_spec(_setup(tmp_path, **changes))
+
+
+def test_the_shipped_example_spec_is_valid_and_uses_tune_flights_only() -> None:
+    spec = load_spec(Path(__file__).resolve().parent.parent / "bench" / "sweep_q.yaml")
+    assert spec.split == "tune"
+    assert set(spec.seeds) == set(spec.definition.splits["tune"])
+    assert len(spec.combinations()) == 6
+
+
+def test_task_keys_follow_the_inputs(tmp_path: Path) -> None:
+    spec = load_spec(_setup(tmp_path))
+    site = load_site(SITE_FILE)
+    a = sweep_tasks(spec, tmp_path / "cache", SITE_FILE, site)
+    assert len(a) == 2 * 2  # 2 seeds x 2 values of q
+    assert len({t.key for t in a}) == 4
+    b = sweep_tasks(spec, tmp_path / "cache", SITE_FILE, site)
+    assert [t.key for t in a] == [t.key for t in b]  # same inputs, same keys
+    spec2 = load_spec(_setup(tmp_path, parameters={"q": [1.0, 5.0]}))
+    c = sweep_tasks(spec2, tmp_path / "cache", SITE_FILE, site)
+    assert a[0].key == c[0].key and a[1].key != c[1].key  # only the changed value differs
+
+
+def test_a_failing_task_is_reported_and_a_rerun_computes_only_what_is_missing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec_file = _setup(tmp_path)
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    argv = ["sweep", str(spec_file), "--out", str(out), "--cache", str(cache),
+            "--workers", "1", "--threads", "--no-figure"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "4 tasks; 0 stored" in text and "4 to run" in text
+    store = out / "results.jsonl"
+    rows = [json.loads(x) for x in store.read_text().splitlines()]
+    assert len(rows) == 4 and all(r["epochs"] > 0 for r in rows)
+
+    # an interrupted run: the seed-4 results are lost (one line cut in half), and the seed-4
+    # flight in the cache is damaged, so its tasks fail
+    keep = [r for r in rows if r["seed"] == 3]
+    lost = [r for r in rows if r["seed"] == 4]
+    store.write_text(
+        "".join(json.dumps(r) + "\n" for r in keep) + json.dumps(lost[0])[:40], encoding="utf-8"
+    )
+    folder4 = next(p for p in cache.iterdir() if p.name.startswith("zigzag_dash-s4-"))
+    for radar in folder4.glob("radar_data_*.json"):
+        radar.unlink()
+    assert main(argv) == 1
+    text = capsys.readouterr().out
+    assert "4 tasks; 2 stored" in text and "2 to run" in text
+    assert text.count("FAILED: paper {'q': ") == 2 and "zigzag_dash-s4" in text
+    failures = json.loads((out / "failures.json").read_text())
+    assert {(f["flight"], tuple(f["params"]["q"])) for f in failures} == {
+        ("zigzag_dash-s4", (1.0, 1.0, 1.0)), ("zigzag_dash-s4", (4.0, 4.0, 4.0))}
+    assert all("radar" in f["error"] for f in failures)
+    with (out / "results.csv").open() as fh:
+        assert len(list(csv.DictReader(fh))) == 2  # the seed-3 results survived
+
+    # repaired (the damaged flight regenerated): only the two missing tasks run, and the
+    # stored ones are not recomputed
+    for p in folder4.iterdir():
+        p.unlink()
+    folder4.rmdir()
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "4 tasks; 2 stored" in text and "2 to run" in text and "failures: 0" in text
+    final = {json.loads(x)["key"]: json.loads(x) for x in store.read_text().splitlines()[2:]}
+    assert len(final) == 2
+    again = {r["key"]: r for r in lost}
+    for key, row in final.items():  # the regenerated flight scores exactly as before
+        for k in ("epochs", "coverage_pct", "err_mean_m", "err_max_m", "anees"):
+            assert json.dumps(row[k]) == json.dumps(again[key][k])  # (NaN == NaN here)
+    with (out / "results.csv").open() as fh:
+        table = list(csv.DictReader(fh))
+    assert sorted((r["seed"], r["q"]) for r in table) == [
+        ("3", "1 1 1"), ("3", "4 4 4"), ("4", "1 1 1"), ("4", "4 4 4")]
+
+
+def test_run_sweep_task_never_raises(tmp_path: Path) -> None:
+    spec = load_spec(_setup(tmp_path))
+    task = sweep_tasks(spec, tmp_path / "cache", SITE_FILE, load_site(SITE_FILE))[0]
+    broken = type(task)(**{**task.__dict__, "profile_path": tmp_path / "gone.yaml"})
+    row = run_sweep_task(broken)
+    assert row["error"] and "gone.yaml" in row["error"]
+    assert row["flight"] == task.flight.flight_id and row["params"] == task.params

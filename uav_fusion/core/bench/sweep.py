@@ -1,0 +1,500 @@
+"""Parameter sweeps: flights x profiles x a grid of profile parameters, scored like the benchmark.
+
+A sweep spec (YAML, e.g. ``bench/sweep_q.yaml``) names:
+
+``name``, ``description``
+    free text;
+``definition``
+    the benchmark definition whose flights and scoring settings are used (a name under
+    ``bench/`` or a path relative to the spec; default ``accuracy``);
+``split``
+    ``tune`` (default) or ``test``: which half's seeds (tuning belongs on ``tune``);
+``plans``, ``seeds``
+    optional subsets of the definition's plans and of the split's seeds;
+``profiles``
+    estimator profiles (names under ``config/profiles/`` or paths relative to the spec);
+``parameters``
+    a mapping from a profile parameter (:data:`PARAMETERS`) to the list of values to try;
+    every combination is run with every profile on every flight;
+``metric``
+    the figure plotted against each parameter (a :class:`~uav_fusion.core.gridscore.GridScore`
+    field, default ``err_mean_m``).
+
+Each task (one flight, one profile, one combination) loads the flight from the benchmark's
+cache (generating it if missing), runs the estimator and scores its fixed-rate output with the
+benchmark's metrics (:func:`uav_fusion.core.bench.run.score_task`). Its result is keyed by a
+hash of its inputs (the flight's cache key, the profile file's bytes, the parameter values and
+the scoring settings), so a re-run computes only what is missing. A task that raises is
+reported as a failure row with its inputs and does not stop the others.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import time
+import traceback
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_flight
+from uav_fusion.core.bench.definition import (
+    SPLITS,
+    BenchDefinition,
+    definition_path,
+    load_definition,
+)
+from uav_fusion.core.bench.run import ScoreTask, score_task
+from uav_fusion.core.errors import ConfigError, UavFusionError
+from uav_fusion.core.estimator.profile import Profile, load_profile, profile_path
+from uav_fusion.core.gridscore import GridScore, ScoreSettings, pool
+from uav_fusion.core.site import Site
+from uav_fusion.core.yamlio import read_yaml_file
+
+_TOP_KEYS = (
+    "name",
+    "description",
+    "definition",
+    "split",
+    "plans",
+    "seeds",
+    "profiles",
+    "parameters",
+    "metric",
+)
+
+#: Profile parameters a sweep may vary: name -> (Profile field, what the value must be).
+#: ``q`` takes one number (the same on the three axes) or a list of three.
+PARAMETERS: dict[str, tuple[str, str]] = {
+    "q": ("q", "a number >= 0 or a list of three"),
+    "nis_probability": ("nis_probability", "a probability in (0, 1)"),
+    "range_gate_m": ("range_gate_m", "a number > 0 or null"),
+    "max_coast_s": ("max_coast_s", "a number > 0 or null"),
+    "max_consecutive_rejections": ("max_consecutive_rejections", "an integer >= 1 or null"),
+    "init_velocity_std_mps": ("init_velocity_std_mps", "a number > 0"),
+    "radar_floor_m": ("radar_floor_m", "a number >= 0"),
+    "rf_floor_m": ("rf_floor_m", "a number >= 0"),
+    "rf_cep_scale": ("rf_cep_scale", "a number > 0"),
+    "rf_max_cep_m": ("rf_max_cep_m", "a number > 0 or null"),
+    "robust_dof": ("robust_dof", "a number > 0"),
+    "smoother_lag_s": ("smoother_lag_s", "a number >= 0 or null"),
+}
+
+METRICS = tuple(f.name for f in fields(GridScore) if f.name not in ("flights",))
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    name: str
+    description: str
+    definition: BenchDefinition
+    split: str
+    plans: tuple[str, ...]  # plan names in the sweep
+    seeds: tuple[int, ...]
+    profiles: tuple[Path, ...]
+    parameters: dict[str, tuple[Any, ...]]
+    metric: str
+    source: Path
+
+    def combinations(self) -> list[dict[str, Any]]:
+        """Every combination of the parameter values (one empty one without parameters)."""
+        names = list(self.parameters)
+        return [
+            dict(zip(names, values, strict=True))
+            for values in itertools.product(*(self.parameters[n] for n in names))
+        ]
+
+
+def _convert(name: str, value: Any, where: str) -> Any:
+    """Check one parameter value (the profile's own validation follows when it is applied)."""
+    what = PARAMETERS[name][1]
+    bad = ConfigError(f"{where}: {what} expected, got {value!r}")
+    if value is None:
+        if "null" not in what:
+            raise bad
+        return None
+    if name == "q":
+        vals = value if isinstance(value, list) else [value]
+        if len(vals) not in (1, 3):
+            raise bad
+        out = []
+        for v in vals:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise bad
+            out.append(float(v))
+        return tuple(out * 3) if len(out) == 1 else tuple(out)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise bad
+    if not math.isfinite(float(value)):
+        raise bad
+    if "integer" in what:
+        if not float(value).is_integer():
+            raise bad
+        return int(value)
+    return float(value)
+
+
+def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
+    """Validate a parsed sweep spec; every error names the file and the key."""
+    src = str(source)
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{src}: expected a mapping at top level")
+    unknown = sorted(set(doc) - set(_TOP_KEYS))
+    if unknown:
+        raise ConfigError(
+            f"{src}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(_TOP_KEYS)})"
+        )
+    base = source.parent
+    ddef = doc.get("definition", "accuracy")
+    if not isinstance(ddef, str):
+        raise ConfigError(f"{src}: definition: a definition name or path expected")
+    dpath = definition_path(ddef)
+    if not dpath.is_absolute() and "/" in ddef:
+        dpath = base / ddef
+    definition = load_definition(dpath)
+    split = doc.get("split", "tune")
+    if split not in SPLITS:
+        raise ConfigError(f"{src}: split: one of {', '.join(SPLITS)} expected, got {split!r}")
+    have_plans = [p.name for p in definition.plans]
+    plans = doc.get("plans", have_plans)
+    if not isinstance(plans, list) or not plans or not all(isinstance(p, str) for p in plans):
+        raise ConfigError(f"{src}: plans: a non-empty list of plan names expected")
+    for p in plans:
+        if p not in have_plans:
+            raise ConfigError(
+                f"{src}: plans: unknown plan {p!r} (the definition {definition.source} has "
+                f"{', '.join(have_plans)})"
+            )
+    have_seeds = list(definition.splits[split])
+    seeds = doc.get("seeds", have_seeds)
+    if not isinstance(seeds, list) or not seeds:
+        raise ConfigError(f"{src}: seeds: a non-empty list of seeds expected")
+    for s in seeds:
+        if s not in have_seeds:
+            raise ConfigError(
+                f"{src}: seeds: seed {s!r} is not in the {split} half of {definition.source} "
+                f"({', '.join(str(x) for x in have_seeds)})"
+            )
+    profs = doc.get("profiles")
+    if not isinstance(profs, list) or not profs or not all(isinstance(p, str) for p in profs):
+        raise ConfigError(f"{src}: profiles: a non-empty list of profile names expected")
+    paths = []
+    for p in profs:
+        path = profile_path(p)
+        if not path.is_absolute() and not path.is_file() and (base / p).is_file():
+            path = base / p
+        if not path.is_file():
+            raise ConfigError(f"{src}: profiles: unknown profile {p!r} (no file {path})")
+        paths.append(path)
+    params_raw = doc.get("parameters", {})
+    if params_raw is None:
+        params_raw = {}
+    if not isinstance(params_raw, dict):
+        raise ConfigError(f"{src}: parameters: a mapping of parameter -> list of values expected")
+    params: dict[str, tuple[Any, ...]] = {}
+    for name, values in params_raw.items():
+        where = f"{src}: parameters.{name}"
+        if name not in PARAMETERS:
+            raise ConfigError(
+                f"{where}: unknown parameter (allowed: {', '.join(sorted(PARAMETERS))})"
+            )
+        if not isinstance(values, list) or not values:
+            raise ConfigError(f"{where}: a non-empty list of values expected")
+        params[name] = tuple(_convert(name, v, where) for v in values)
+    metric = doc.get("metric", "err_mean_m")
+    if metric not in METRICS:
+        raise ConfigError(f"{src}: metric: one of {', '.join(METRICS)} expected, got {metric!r}")
+    spec = SweepSpec(
+        name=str(doc.get("name", source.stem)),
+        description=str(doc.get("description", "")),
+        definition=definition,
+        split=split,
+        plans=tuple(plans),
+        seeds=tuple(int(s) for s in seeds),
+        profiles=tuple(paths),
+        parameters=params,
+        metric=metric,
+        source=source,
+    )
+    # apply every combination to every profile once, so a value the profile refuses (e.g. a
+    # q of the wrong sign) stops here, naming the spec and the parameter, not in a worker
+    for path in spec.profiles:
+        prof = load_profile(path)
+        for combo in spec.combinations():
+            try:
+                apply_parameters(prof, combo)
+            except ConfigError as exc:
+                raise ConfigError(f"{src}: parameters {combo}: {exc}") from None
+    return spec
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    p = Path(path)
+    return spec_from_dict(read_yaml_file(p, "sweep spec"), p)
+
+
+def apply_parameters(profile: Profile, combo: dict[str, Any]) -> Profile:
+    """``profile`` with the combination's values (validated by the profile's own rules)."""
+    if not combo:
+        return profile
+    return profile.with_changes(**{PARAMETERS[k][0]: v for k, v in combo.items()})
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One task: a flight, a profile (file) and a parameter combination."""
+
+    key: str
+    flight: CachedFlight
+    definition: BenchDefinition
+    profile_path: Path
+    params: dict[str, Any]
+    site: Site
+    grid_hz: float
+    settings: ScoreSettings
+
+    def describe(self) -> str:
+        return f"{self.profile_path.stem} {self.params} on {self.flight.flight_id}"
+
+
+def task_key(
+    flight: CachedFlight, profile_file: Path, params: dict[str, Any], definition: BenchDefinition
+) -> str:
+    """Hash of a task's inputs: what decides its result."""
+    h = hashlib.sha256()
+    h.update(flight.folder.name.encode())  # plan, seed and the flight's cache key
+    h.update(b"\0profile\0" + profile_file.read_bytes())
+    h.update(b"\0params\0" + json.dumps(params, sort_keys=True).encode())
+    h.update(b"\0scoring\0" + repr((definition.grid_hz, definition.settings)).encode())
+    return h.hexdigest()[:20]
+
+
+def sweep_tasks(spec: SweepSpec, cache_dir: Path, site_file: Path, site: Site) -> list[SweepTask]:
+    """Every task of the sweep, flight by flight, profile by profile, combination by
+    combination."""
+    flights = [
+        f
+        for f in cached_flights(spec.definition, spec.split, cache_dir, site_file)
+        if f.flight.plan.name in spec.plans and f.flight.seed in spec.seeds
+    ]
+    out = []
+    for f in flights:
+        for path in spec.profiles:
+            for combo in spec.combinations():
+                out.append(
+                    SweepTask(
+                        key=task_key(f, path, combo, spec.definition),
+                        flight=f,
+                        definition=spec.definition,
+                        profile_path=path,
+                        params=combo,
+                        site=site,
+                        grid_hz=spec.definition.grid_hz,
+                        settings=spec.definition.settings,
+                    )
+                )
+    return out
+
+
+def run_sweep_task(task: SweepTask) -> dict[str, Any]:
+    """Run one task; never raises: a failure comes back as a row with ``error`` set."""
+    t0 = time.perf_counter()
+    row: dict[str, Any] = {
+        "key": task.key,
+        "flight": task.flight.flight_id,
+        "plan": task.flight.flight.plan.name,
+        "seed": task.flight.flight.seed,
+        "profile": task.profile_path.stem,
+        "params": task.params,
+        "error": "",
+    }
+    try:
+        generate_flight(task.flight, task.definition, task.site)
+        profile = apply_parameters(load_profile(task.profile_path), task.params)
+        result = score_task(
+            ScoreTask(task.flight, profile, task.site, task.grid_hz, task.settings)
+        )
+        score = pool([result.samples], task.settings)
+        row.update({k: v for k, v in asdict(score).items() if k != "flights"})
+        row["profile"] = profile.name
+    except Exception as exc:
+        kind = "" if isinstance(exc, UavFusionError) else f"{type(exc).__name__}: "
+        row["error"] = f"{kind}{exc}"
+        row["traceback"] = traceback.format_exc(limit=6)
+    row["seconds"] = round(time.perf_counter() - t0, 3)
+    return row
+
+
+class ResultStore:
+    """The sweep's results, one JSON line per finished task (``results.jsonl``), appended as
+    tasks finish so an interrupted run keeps what was done. Failures are not stored: a re-run
+    tries them again."""
+
+    def __init__(self, folder: Path) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        self.path = folder / "results.jsonl"
+        self.rows: dict[str, dict[str, Any]] = {}
+        if self.path.is_file():
+            text = self.path.read_text(encoding="utf-8")
+            cut = 0
+            for n, line in enumerate(text.splitlines(), 1):
+                if not line.strip():
+                    continue
+                try:
+                    row = json.loads(line)
+                except json.JSONDecodeError:  # a line cut by an interruption
+                    cut += 1
+                    continue
+                if isinstance(row, dict) and isinstance(row.get("key"), str):
+                    self.rows[row["key"]] = row
+                else:
+                    raise ConfigError(f"{self.path}:{n}: not a sweep result row")
+            if cut or (text and not text.endswith("\n")):
+                # rewrite without the cut line, so appended rows start on a line of their own
+                self.path.write_text(
+                    "".join(json.dumps(r, default=_json_default) + "\n"
+                            for r in self.rows.values()),
+                    encoding="utf-8",
+                )
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.rows
+
+    def add(self, row: dict[str, Any]) -> None:
+        if row.get("error"):
+            return
+        self.rows[row["key"]] = row
+        with self.path.open("a", encoding="utf-8") as fh:
+            fh.write(json.dumps(row, default=_json_default) + "\n")
+
+
+def _json_default(v: Any) -> Any:
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if hasattr(v, "item"):
+        return v.item()
+    raise TypeError(f"not JSON serialisable: {v!r}")
+
+
+RESULT_COLUMNS = ("flight", "plan", "seed", "profile")
+
+
+def write_table(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Path:
+    """One CSV row per task: inputs (flight, profile, one column per parameter) then the
+    benchmark's figures."""
+    import csv
+
+    pnames = list(spec.parameters)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow([*RESULT_COLUMNS, *pnames, *METRICS, "seconds", "key"])
+        for r in rows:
+            w.writerow(
+                [r[c] for c in RESULT_COLUMNS]
+                + [_cell(r["params"].get(p)) for p in pnames]
+                + [_cell(r.get(m)) for m in METRICS]
+                + [r.get("seconds", ""), r["key"]]
+            )
+    return path
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, (list, tuple)):
+        return " ".join(_cell(x) for x in v)
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def _value_label(v: Any) -> str:
+    if isinstance(v, (list, tuple)):
+        return str(v[0]) if len(set(v)) == 1 else "/".join(str(x) for x in v)
+    return "null" if v is None else f"{v:g}"
+
+
+def summary_rows(rows: list[dict[str, Any]], spec: SweepSpec) -> list[tuple[str, str, float,
+                                                                               float, float, int]]:
+    """Per profile and combination: the metric's mean, min and max over the flights."""
+    groups: dict[tuple[str, str], list[float]] = {}
+    for r in rows:
+        label = ", ".join(f"{k}={_value_label(v)}" for k, v in r["params"].items()) or "-"
+        val = r.get(spec.metric)
+        if val is None or not math.isfinite(float(val)):
+            continue
+        groups.setdefault((r["profile"], label), []).append(float(val))
+    out = []
+    for (prof, label), vals in groups.items():
+        out.append((prof, label, sum(vals) / len(vals), min(vals), max(vals), len(vals)))
+    return out
+
+
+def write_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Path | None:
+    """The metric against each parameter, a line per profile (median over the flights and
+    the other parameters' values) with the spread over flights as a band (min to max)."""
+    if not spec.parameters or not rows:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(spec.parameters)
+    fig, axes = plt.subplots(1, len(names), figsize=(5.5 * len(names), 4.2), squeeze=False)
+    profiles = sorted({r["profile"] for r in rows})
+    for ax, name in zip(axes[0], names, strict=True):
+        values = list(spec.parameters[name])
+        xs = list(range(len(values)))
+        for prof in profiles:
+            med, lo, hi = [], [], []
+            for v in values:
+                vals = [
+                    float(r[spec.metric])
+                    for r in rows
+                    if r["profile"] == prof
+                    and _same(r["params"].get(name), v)
+                    and r.get(spec.metric) is not None
+                    and math.isfinite(float(r[spec.metric]))
+                ]
+                vals.sort()
+                if vals:
+                    med.append(vals[len(vals) // 2])
+                    lo.append(vals[0])
+                    hi.append(vals[-1])
+                else:
+                    med.append(math.nan)
+                    lo.append(math.nan)
+                    hi.append(math.nan)
+            line = ax.plot(xs, med, marker="o", label=prof)[0]
+            ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.15)
+        finite = [float(r[spec.metric]) for r in rows if r.get(spec.metric) is not None
+                  and math.isfinite(float(r[spec.metric])) and float(r[spec.metric]) > 0]
+        if finite and max(finite) > 20 * min(finite):
+            ax.set_yscale("log")  # one bad flight must not flatten the others
+        ax.set_xticks(xs, [_value_label(v) for v in values])
+        ax.set_xlabel(name)
+        ax.set_ylabel(f"{spec.metric} (per flight)")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    n_fl = len({r["flight"] for r in rows})
+    fig.suptitle(
+        f"sweep {spec.name}: {spec.metric}, median over {n_fl} {spec.split} flights "
+        "(band: min to max)",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, list):
+        a = tuple(a)
+    if isinstance(b, list):
+        b = tuple(b)
+    return bool(a == b)
