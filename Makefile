@@ -13,7 +13,7 @@ DEV_STAMP := $(VENV)/.dev-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 DOMAIN = $${ROS_DOMAIN_ID:-$$(( RANDOM % 100 + 1 ))}
 
-.PHONY: demo test lint bench bench-accuracy bench-node fuzz clean
+.PHONY: demo test lint bench bench-accuracy bench-node bench-sweep fuzz clean
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -55,6 +55,10 @@ bench-accuracy: $(RUNTIME_STAMP)
 # fusion_node against a bare rclpy relay (own processes, own domain above 100)
 bench-node: $(DEV_STAMP)
 	$(PY) scripts/bench_node.py $(BENCH_ARGS)
+
+# sweep engine scaling: 2 Dask workers vs 1, and Dask's overhead vs a plain loop
+bench-sweep: $(RUNTIME_STAMP)
+	$(PY) scripts/bench_sweep.py
 
 clean:
 	rm -rf build install log out .pytest_cache .mypy_cache .ruff_cache

@@ -85,6 +85,7 @@ class Engine:
         self.stream = stream if stream is not None else sys.stderr
         self._client: Any = None
         self._cluster: Any = None
+        self._config: Any = None
 
     @property
     def description(self) -> str:
@@ -95,8 +96,14 @@ class Engine:
         return f"Dask local cluster, {self.workers} worker {kind}"
 
     def __enter__(self) -> Engine:
+        import dask
         from distributed import Client, LocalCluster
 
+        # Dask workers sample their own stacks every 10 ms for the dashboard's profiler; on
+        # this package's pure-Python tasks that cost about 40 % of the run time in a worker
+        # process (measured with scripts/bench_sweep.py). No dashboard runs here, so local
+        # workers start with it off (workers of an existing cluster keep their own setting).
+        self._config = dask.config.set({"distributed.worker.profile.enabled": False})
         if self.scheduler:
             self._client = Client(self.scheduler)
         else:
@@ -124,6 +131,9 @@ class Engine:
         if self._cluster is not None:
             self._cluster.close()
         self._client = self._cluster = None
+        if self._config is not None:
+            self._config.__exit__(None, None, None)
+            self._config = None
 
     def map(
         self,
