@@ -58,6 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", help="output folder (default: out/bench/<definition>-<split>)"
     )
+    add_engine_arguments(parser)
+    parser.add_argument("--no-figure", action="store_true", help="do not draw the figure")
+
+
+def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of the commands that run on the Dask engine (bench, sweep)."""
     parser.add_argument(
         "--cache", default="out/bench_cache", help="flight cache folder (default: out/bench_cache)"
     )
@@ -73,7 +79,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="local workers as threads of this process instead of processes (for debugging)",
     )
     parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
-    parser.add_argument("--no-figure", action="store_true", help="do not draw the figure")
 
 
 def run(args: argparse.Namespace) -> int:

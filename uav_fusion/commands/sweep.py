@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from uav_fusion.commands.bench import add_engine_arguments
 from uav_fusion.core.bench.sweep import (
     ResultStore,
     SweepTask,
@@ -35,19 +36,7 @@ HELP = "parameter sweep: flights x profiles x parameter values, scored like the 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("spec", help="sweep spec YAML (e.g. bench/sweep_q.yaml)")
     parser.add_argument("--out", help="output folder (default: out/sweep/<spec name>)")
-    parser.add_argument(
-        "--cache", default="out/bench_cache", help="flight cache folder (default: out/bench_cache)"
-    )
-    parser.add_argument(
-        "--workers", type=int, help="local worker processes (default: one per core)"
-    )
-    parser.add_argument(
-        "--scheduler", metavar="ADDRESS", help="use an existing Dask cluster (e.g. tcp://host:8786)"
-    )
-    parser.add_argument(
-        "--threads", action="store_true", help="local workers as threads of this process"
-    )
-    parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
+    add_engine_arguments(parser)
     parser.add_argument("--no-figure", action="store_true", help="do not draw the figure")
 
 
