@@ -82,6 +82,8 @@ class RfAttempt:
     valid_sensors: int | None
     total_sensors: int | None
     line: int = 0
+    center_freq_hz: float | None = None  # the emitter channel's centre frequency
+    rho: float | None = None  # correlation quality of the TDOA solution
 
 
 @dataclass

@@ -37,6 +37,7 @@ truth NavSatFix with status NO_FIX)) so nodes can count drops.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -46,8 +47,9 @@ import numpy.typing as npt
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry, Path
-from sensor_msgs.msg import NavSatFix, NavSatStatus
+from sensor_msgs.msg import NavSatFix, NavSatStatus, PointCloud2, PointField
 
+from uav_fusion.core import clouds
 from uav_fusion.core.dataset.radar import H_MAX, H_MIN
 from uav_fusion.core.encoding import (
     UNKNOWN_VARIANCE,
@@ -64,6 +66,7 @@ from uav_fusion.core.records import (
     RADAR,
     RF,
     Measurement,
+    RadarFrame,
     RadarTrack,
     RfAttempt,
     TruthFix,
@@ -325,6 +328,81 @@ def msg_to_rf_measurement(
         )
     return Measurement(t=t, source=RF, z=np.array((x, y)), R=None if R is None else np.array(R),
                        seq=seq)
+
+
+# --- every report and fix: PointCloud2 (layout: uav_fusion.core.clouds) -----------------
+
+
+def cloud_to_msg(t: float, cloud: clouds.Cloud, frame_id: str) -> PointCloud2:
+    """A core :class:`~uav_fusion.core.clouds.Cloud` as a stamped PointCloud2."""
+    msg = PointCloud2()
+    msg.header.stamp = stamp_from_time(t)
+    msg.header.frame_id = frame_id
+    msg.height = 1
+    msg.width = cloud.width
+    msg.fields = [
+        PointField(name=f.name, offset=f.offset, datatype=f.datatype, count=f.count)
+        for f in cloud.fields
+    ]
+    msg.is_bigendian = False
+    msg.point_step = cloud.point_step
+    msg.row_step = cloud.row_step
+    msg.data = cloud.data
+    msg.is_dense = False
+    return msg
+
+
+def radar_frame_to_cloud_msg(
+    frame: RadarFrame, frame_id: str, cov: clouds.CovFn | None = None
+) -> PointCloud2:
+    """Every report of a radar frame (``radar/tracks``)."""
+    return cloud_to_msg(frame.t, clouds.radar_frame_to_cloud(frame, cov), frame_id)
+
+
+def rf_attempts_to_cloud_msg(attempts: Sequence[RfAttempt], frame_id: str) -> PointCloud2:
+    """RF attempts stamped with the first one's time (``rf/fixes``; one attempt per message
+    in the replay)."""
+    if not attempts:
+        raise MessageError("empty", "no RF attempt to publish")
+    return cloud_to_msg(attempts[0].t, clouds.rf_attempts_to_cloud(attempts), frame_id)
+
+
+def _cloud_fields(msg: PointCloud2) -> list[clouds.CloudField]:
+    return [clouds.CloudField(f.name, int(f.offset), int(f.datatype), int(f.count))
+            for f in msg.fields]
+
+
+def _cloud_header(msg: PointCloud2, expected_frame: str | None) -> float:
+    t = _check_stamp(msg.header.stamp)
+    if expected_frame and msg.header.frame_id != expected_frame:
+        _check_frame(msg.header.frame_id, expected_frame)
+    return t
+
+
+def msg_to_radar_frame(
+    msg: PointCloud2, expected_frame: str | None = None
+) -> tuple[RadarFrame, Counter[str]]:
+    """``radar/tracks`` -> the frame of its valid reports and the dropped points by reason.
+
+    Raises :class:`MessageError` for an unusable message (stamp, frame, layout)."""
+    t = _cloud_header(msg, expected_frame)
+    return clouds.cloud_to_radar_frame(
+        t, _cloud_fields(msg), int(msg.point_step), int(msg.width), int(msg.height),
+        bool(msg.is_bigendian), bytes(msg.data),
+    )
+
+
+def msg_to_rf_attempts(
+    msg: PointCloud2, expected_frame: str | None = None
+) -> tuple[list[RfAttempt], Counter[str]]:
+    """``rf/fixes`` -> its attempts (failed ones as ``ok=False``) and the dropped points.
+
+    Raises :class:`MessageError` for an unusable message (stamp, frame, layout)."""
+    t = _cloud_header(msg, expected_frame)
+    return clouds.cloud_to_rf_attempts(
+        t, _cloud_fields(msg), int(msg.point_step), int(msg.width), int(msg.height),
+        bool(msg.is_bigendian), bytes(msg.data),
+    )
 
 
 # --- truth --------------------------------------------------------------------------------

@@ -5,8 +5,9 @@ Header (names may carry stray spaces, matched without case)::
     Meas ID,Algorithm,Center Frequency,Sample Rate,Num Samples,Latitude,Longitude,Elevation,
     RHO,CEP,Total Sensors,Valid Sensors,Overloaded Sensors,Sensor Names,Time,Comment
 
-Required columns: Meas ID, Latitude, Longitude, Time. CEP, Total Sensors and Valid Sensors
-are kept when present. ``Time`` is the file clock (UTC for these files) such as
+Required columns: Meas ID, Latitude, Longitude, Time. CEP, Total Sensors, Valid Sensors,
+Center Frequency (Hz) and RHO are kept when present. ``Time`` is the file clock (UTC for
+these files) such as
 ``2025-10-07 19:42:20.000``; UTC = file time − ``site.clock_offset_s("rf")``.
 
 A failed attempt (Latitude = Longitude = 0) is kept as ``RfAttempt(ok=False)`` with NaN
@@ -36,7 +37,7 @@ from uav_fusion.core.records import LoadReport, RfAttempt
 from uav_fusion.core.site import Site
 
 REQUIRED = ("Meas ID", "Latitude", "Longitude", "Time")
-OPTIONAL = ("CEP", "Total Sensors", "Valid Sensors")
+OPTIONAL = ("CEP", "Total Sensors", "Valid Sensors", "Center Frequency", "RHO")
 
 
 def _key(name: str) -> str:
@@ -81,12 +82,15 @@ def read_rf_csv(
         return [], src.finish()
 
     i_id, i_lat, i_lon, i_time = (col[_key(c)] for c in REQUIRED)
-    i_cep, i_tot, i_val = (col.get(_key(c)) for c in OPTIONAL)
+    i_cep, i_tot, i_val, i_freq, i_rho = (col.get(_key(c)) for c in OPTIONAL)
     n_cols = len(header)
     offset = site.clock_offset_s("rf")
     order = TimeOrder(src)
 
-    kept: list[tuple[float, int, float, float, float | None, int | None, int | None, int]] = []
+    kept: list[
+        tuple[float, int, float, float, float | None, int | None, int | None, int,
+              float | None, float | None]
+    ] = []
     for line, text in rows:
         f, not_csv = csv_fields(text)
         if f is None:
@@ -123,7 +127,9 @@ def read_rf_csv(
         cep = _opt_float(src, line, f, i_cep, "CEP")
         tot = _opt_int(src, line, f, i_tot, "Total Sensors")
         val = _opt_int(src, line, f, i_val, "Valid Sensors")
-        kept.append((t, meas_id, lat, lon, cep, tot, val, line))
+        freq = _opt_float(src, line, f, i_freq, "Center Frequency")
+        rho = _opt_float(src, line, f, i_rho, "RHO")
+        kept.append((t, meas_id, lat, lon, cep, tot, val, line, freq, rho))
 
     lat_a = np.array([k[2] for k in kept], dtype=float)
     lon_a = np.array([k[3] for k in kept], dtype=float)
@@ -146,6 +152,8 @@ def read_rf_csv(
             valid_sensors=k[6],
             total_sensors=k[5],
             line=k[7],
+            center_freq_hz=k[8],
+            rho=k[9],
         )
         for j, k in enumerate(kept)
     ]
