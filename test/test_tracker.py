@@ -3,6 +3,7 @@ frames and RF fixes, the fixed-rate accessors, and the offline runner."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -74,6 +75,18 @@ def _imm(**changes: Any) -> dict[str, Any]:
         (lambda d: d["association"].update(rf_tau_s=-1.0), r"association\.rf_tau_s"),
         (lambda d: d["association"].update(speed=3), "unknown key 'association.speed'"),
         (lambda d: d.update(smoother={"lag_s": -1.0}), r"smoother\.lag_s"),
+        (
+            lambda d: d["association"].update(skip_radar_coasts="yes"),
+            r"association\.skip_radar_coasts must be true or false",
+        ),
+        (
+            lambda d: d["measurement"]["radar"].update(low_el_gain=-1.0),
+            r"measurement\.radar\.low_el_gain",
+        ),
+        (
+            lambda d: d["measurement"]["radar"].update(low_el_deg=0.0),
+            r"measurement\.radar\.low_el_deg must be > 0",
+        ),
     ],
 )
 def test_tracker_profile_errors_name_file_and_key(
@@ -138,7 +151,8 @@ class Scene:
     ) -> RadarTrack:
         z = p + self.rng.normal(0.0, sd, 3)
         v = (float(vel[1]), float(vel[0]), float(-vel[2]))  # NED
-        return RadarTrack(t, tid, 0.0, 0.0, 0.0, *map(float, z), v, prob, None, -10.0)
+        rcs = round(-10.0 + float(self.rng.normal(0.0, 2.0)), 3)  # fluctuates look to look
+        return RadarTrack(t, tid, 0.0, 0.0, 0.0, *map(float, z), v, prob, None, rcs)
 
     def build(
         self,
@@ -338,6 +352,39 @@ def test_invalid_reports_never_reach_the_state(site: Site) -> None:
     steps = run_tracker(tracker, stream)
     assert any(s.reason == "invalid" for s in steps)
     assert all(np.all(np.isfinite(s.x)) for s in steps if s.counted)
+
+
+def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
+    """A report repeating its radar track's velocity and RCS is the radar's own prediction
+    (a coast): with ``skip_radar_coasts`` the fused track does not take it, without it does."""
+    sc = Scene(site, seed=7)
+    sc.build(60.0)
+    frames = []
+    for f in sc.frames:
+        if 30.0 <= f.t < 34.0 and f.tracks:  # the onboard track coasts for 4 s
+            prev = frames[-1].tracks[0]
+            tr = f.tracks[0]
+            coast = RadarTrack(
+                f.t, tr.track_id, 0.0, 0.0, 0.0, tr.e, tr.n, tr.u, prev.vel_ned, tr.uav_prob,
+                None, prev.rcs_dbsm,
+            )
+            f = RadarFrame(f.t, (coast,))
+        frames.append(f)
+    sc.frames = frames
+    on = load_profile("tracker")
+    assert on.score.skip_radar_coasts
+    off = on.with_changes(score=dataclasses.replace(on.score, skip_radar_coasts=False))
+    steps_on = run_tracker(Tracker(on, site), sc.stream())
+    steps_off = run_tracker(Tracker(off, site), sc.stream())
+    coasts = [s for s in steps_on if s.reason == "coast"]
+    # every report of the coast repeats the one before it (4 s at 4 Hz); none other does
+    assert len(coasts) == 16 and all(30.0 <= s.t < 34.0 for s in coasts)
+    assert all(s.status == "discarded" for s in coasts)
+    assert not any(s.reason == "coast" for s in steps_off)
+    used_off = [
+        s for s in steps_off if 30.0 <= s.t < 34.0 and s.updated and s.source == "radar"
+    ]
+    assert len(used_off) == 16
 
 
 # --- the runner -----------------------------------------------------------------------------

@@ -76,6 +76,8 @@ PARAMETERS: dict[str, tuple[str, str]] = {
     "max_consecutive_rejections": ("max_consecutive_rejections", "an integer >= 1 or null"),
     "init_velocity_std_mps": ("init_velocity_std_mps", "a number > 0"),
     "radar_floor_m": ("radar_floor_m", "a number >= 0"),
+    "radar_sigma_el_deg": ("radar_sigma_el_deg", "a number >= 0"),
+    "radar_low_el_gain": ("radar_low_el_gain", "a number >= 0"),
     "rf_floor_m": ("rf_floor_m", "a number >= 0"),
     "rf_cep_scale": ("rf_cep_scale", "a number > 0"),
     "rf_max_cep_m": ("rf_max_cep_m", "a number > 0 or null"),

@@ -22,6 +22,12 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
   the track's R allows for correlated errors), times ``fused_weight``;
 * age: ``age_weight * min(1, age / age_full_s)`` (a track that persists is more likely real).
+
+A *coasted* report is one whose velocity and RCS repeat the same radar track's previous report
+exactly: the radar's own tracker had no detection for it and reported its prediction
+(:attr:`RadarObject.coasting`). It carries no new measurement; with ``skip_radar_coasts`` the
+fused track does not take it (it would count the radar's prediction as a fresh measurement
+with independent noise).
 """
 
 from __future__ import annotations
@@ -68,6 +74,7 @@ class ScoreConfig:
     follow_min: float = 0.0
     init_min: float = 1.0
     init_min_reports: int = 4
+    skip_radar_coasts: bool = False
 
 
 
@@ -88,6 +95,7 @@ class RadarObject:
 
     __slots__ = (
         "class_logit",
+        "coasting",
         "first_t",
         "fused",
         "fused_t",
@@ -99,6 +107,7 @@ class RadarObject:
         "rcs_mean",
         "rf_support",
         "rf_t",
+        "signature",
         "speed",
         "up",
     )
@@ -118,6 +127,8 @@ class RadarObject:
         self.rf_t = t
         self.fused = 0.0
         self.fused_t: float | None = None
+        self.signature: tuple[object, ...] | None = None
+        self.coasting = False
 
     @property
     def age_s(self) -> float:
@@ -216,6 +227,11 @@ class ObjectTable:
             obj.class_logit = (
                 lg if obj.n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
             )
+        sig = (trk.vel_ned, trk.rcs_dbsm)
+        obj.coasting = (
+            obj.signature is not None and trk.vel_ned is not None and sig == obj.signature
+        )
+        obj.signature = sig
         obj.n_reports += 1
         obj.last_t = t
         return obj

@@ -72,6 +72,8 @@ class Profile:
     radar_sigma_az_deg: float = 1.5
     radar_sigma_el_deg: float = 1.5
     radar_floor_m: float = 0.0
+    radar_low_el_gain: float = 0.0
+    radar_low_el_deg: float = 4.0
     rf_model: str = "fixed"  # fixed (r_rf) | cep
     rf_cep_scale: float = 1.0
     rf_floor_m: float = 5.0
@@ -152,6 +154,8 @@ class Profile:
                 sigma_az_deg=self.radar_sigma_az_deg,
                 sigma_el_deg=self.radar_sigma_el_deg,
                 floor_m=self.radar_floor_m,
+                low_el_gain=self.radar_low_el_gain,
+                low_el_deg=self.radar_low_el_deg,
             )
             d["measurement"]["rf"].update(
                 model=self.rf_model,
@@ -192,7 +196,10 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "motion": ("model", "q", "imm"),
     "motion.imm": ("q", "transition", "initial"),
     "measurement": ("radar", "rf", "note"),
-    "measurement.radar": ("R", "model", "sigma_range_m", "sigma_az_deg", "sigma_el_deg", "floor_m"),
+    "measurement.radar": (
+        "R", "model", "sigma_range_m", "sigma_az_deg", "sigma_el_deg", "floor_m",
+        "low_el_gain", "low_el_deg",
+    ),
     "measurement.rf": (
         *("R", "model", "cep_scale", "floor_m", "ref_sensors", "sensor_exponent", "max_cep_m"),
     ),
@@ -333,6 +340,7 @@ def _validate_tracker(p: Profile, where: str) -> None:
         ("measurement.radar.sigma_az_deg", p.radar_sigma_az_deg),
         ("measurement.radar.sigma_el_deg", p.radar_sigma_el_deg),
         ("measurement.radar.floor_m", p.radar_floor_m),
+        ("measurement.radar.low_el_gain", p.radar_low_el_gain),
         ("measurement.rf.floor_m", p.rf_floor_m),
     ):
         if not v >= 0:
@@ -379,7 +387,7 @@ def _validate_tracker(p: Profile, where: str) -> None:
     sc = p.score
     for key in score_keys():
         v = getattr(sc, key)
-        if key in ("follow_min", "init_min", "bird_rcs_dbsm"):
+        if key in ("follow_min", "init_min", "bird_rcs_dbsm", "skip_radar_coasts"):
             continue
         if not v >= 0:
             raise ConfigError(f"{where}: association.{key} must be >= 0, got {v}")
@@ -551,8 +559,14 @@ def _tracker_fields(
         ("sigma_az_deg", "radar_sigma_az_deg", 1.5),
         ("sigma_el_deg", "radar_sigma_el_deg", 1.5),
         ("floor_m", "radar_floor_m", 0.0),
+        ("low_el_gain", "radar_low_el_gain", 0.0),
+        ("low_el_deg", "radar_low_el_deg", 4.0),
     ):
         out[name] = _float(radar, key, at_r, default)
+    if not out["radar_low_el_deg"] > 0:
+        raise ConfigError(
+            f"{at_r}.low_el_deg must be > 0 (an elevation scale), got {out['radar_low_el_deg']}"
+        )
     at_f = f"{where}: measurement.rf"
     out["rf_model"] = _choice(rf, "model", RF_MODELS, "fixed", at_f)
     out["rf_cep_scale"] = _float(rf, "cep_scale", at_f, 1.0)
@@ -580,6 +594,11 @@ def _tracker_fields(
                     v = assoc[key]
                     if not isinstance(v, int) or isinstance(v, bool):
                         raise ConfigError(f"{where}: association.{key} must be an integer")
+                    vals[key] = v
+                elif key == "skip_radar_coasts":
+                    v = assoc[key]
+                    if not isinstance(v, bool):
+                        raise ConfigError(f"{where}: association.{key} must be true or false")
                     vals[key] = v
                 else:
                     vals[key] = _float(assoc, key, f"{where}: association", getattr(defaults, key))

@@ -168,6 +168,8 @@ def radar_model_from_profile(profile: Profile, site: Site) -> RadarRModel:
             math.radians(profile.radar_sigma_az_deg),
             math.radians(profile.radar_sigma_el_deg),
             profile.radar_floor_m,
+            profile.radar_low_el_gain,
+            profile.radar_low_el_deg,
         )
     return FixedRadarR(pack_r(profile.r_radar))
 
@@ -397,6 +399,9 @@ class Tracker:
             if d2 > self._gate2:
                 z = (trk.e, trk.n, trk.u)
                 out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, z, trk.track_id)
+            elif obj.coasting and self.cfg.skip_radar_coasts:
+                z = (trk.e, trk.n, trk.u)
+                out[i] = self._step(t, RADAR, DISCARDED, "coast", None, z, trk.track_id)
             else:
                 cands.append((i, trk, obj, obj.score(self.cfg)))
         if cands:
