@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.metrics import interpolate_truth, position_errors
 from uav_fusion.core.site import Site, load_site
+from uav_fusion.resources import data_path
 
 T0 = 1759866140.0  # 2025-10-07 19:42:20 UTC
 RF_HEADER = (
@@ -192,3 +194,81 @@ def test_sensor_without_data_is_noted(tmp_path: Path, site: Site) -> None:
     assert fl.reports["radar"].notes[-1] == (
         "WARNING: no data, the timeline could not be checked against truth"
     )
+
+
+# --- several UAVs: the folder rules ---------------------------------------------------------
+def _multi(tmp_path: Path) -> tuple[Path, str]:
+    src = data_path("default_flight")
+    folder = tmp_path / "multi"
+    shutil.copytree(src, folder)
+    base = next(folder.glob("*_vehicleOut.txt"))
+    stamp = base.name[: -len("_vehicleOut.txt")]
+    return folder, stamp
+
+
+def test_one_truth_file_per_uav_by_the_naming_rule(tmp_path: Path, site: Site) -> None:
+    folder, stamp = _multi(tmp_path)
+    base = folder / f"{stamp}_vehicleOut.txt"
+    lines = base.read_text().splitlines(keepends=True)
+    # uav2: the same log cut short (a different vehicle, readable on its own)
+    (folder / f"{stamp}_uav2_vehicleOut.txt").write_text("".join(lines[: len(lines) // 2]))
+    (folder / f"{stamp}_scout-3_vehicleOut.txt").write_text("".join(lines))
+    fl = load_flight(folder, site)
+    assert list(fl.vehicles) == ["uav1", "scout-3", "uav2"]
+    assert fl.truth is fl.vehicles["uav1"]
+    single = load_flight(data_path("default_flight"), site)
+    assert [f.t for f in fl.truth] == [f.t for f in single.truth]
+    assert len(fl.vehicles["uav2"]) < len(fl.truth)
+    assert {"truth", "truth:uav2", "truth:scout-3"} <= set(fl.reports)
+    t2, enu2 = fl.truth_arrays("uav2")
+    assert t2.shape[0] == enu2.shape[0] == len(fl.vehicles["uav2"])
+
+
+def test_a_single_uav_folder_has_one_vehicle(site: Site) -> None:
+    fl = load_flight(data_path("default_flight"), site)
+    assert list(fl.vehicles) == ["uav1"] and fl.vehicles["uav1"] is fl.truth
+
+
+@pytest.mark.parametrize(
+    ("names", "message"),
+    [
+        (["uav2_vehicleOut.txt"], "this name breaks the rule"),
+        (["{stamp}_uav 2_vehicleOut.txt"], "this name breaks the rule"),
+        (["2024-01-01_00-00-00_uav2_vehicleOut.txt"], "different recording stamps"),
+        (["{stamp}_uav1_vehicleOut.txt"], "vehicle 'uav1' is the file without a vehicle name"),
+        (["{stamp}_uav2_vehicleOut.txt", "{stamp}_UAV2_vehicleOut.txt"], "more than one"),
+    ],
+)
+def test_truth_files_breaking_the_rules_are_named(
+    tmp_path: Path, site: Site, names: list[str], message: str
+) -> None:
+    folder, stamp = _multi(tmp_path)
+    base = folder / f"{stamp}_vehicleOut.txt"
+    for n in names:
+        shutil.copy(base, folder / n.format(stamp=stamp))
+    with pytest.raises(DataError, match=message) as ei:
+        load_flight(folder, site)
+    culprit = names[-1].format(stamp=stamp)
+    if "stamps" not in message:
+        assert culprit in str(ei.value) or str(folder) in str(ei.value)
+
+
+def test_no_first_uav_among_several_files(tmp_path: Path, site: Site) -> None:
+    folder, stamp = _multi(tmp_path)
+    base = folder / f"{stamp}_vehicleOut.txt"
+    shutil.copy(base, folder / f"{stamp}_uav2_vehicleOut.txt")
+    base.rename(folder / f"{stamp}_uav3_vehicleOut.txt")
+    with pytest.raises(DataError, match="0 truth files without a vehicle name"):
+        load_flight(folder, site)
+
+
+def test_an_unreadable_second_truth_file_is_named(tmp_path: Path, site: Site) -> None:
+    folder, stamp = _multi(tmp_path)
+    bad = folder / f"{stamp}_uav2_vehicleOut.txt"
+    bad.write_text("this is not a vehicle log\n")
+    with pytest.raises(DataError) as ei:
+        load_flight(folder, site, strict=True)
+    assert str(bad) in str(ei.value)
+    fl = load_flight(folder, site)  # lenient: uav2 read as empty, its report says why
+    assert fl.vehicles["uav2"] == [] and fl.reports["truth:uav2"].rows >= 0
+    assert fl.reports["truth:uav2"].skipped or fl.reports["truth:uav2"].notes

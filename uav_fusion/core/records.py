@@ -136,9 +136,18 @@ class Measurement:
         return int(self.z.shape[0])
 
 
+#: Name of the first (or only) UAV of a flight.
+FIRST_VEHICLE = "uav1"
+
+
 @dataclass
 class Flight:
-    """One flight: truth, radar frames and RF attempts on one UTC timeline, plus load reports."""
+    """One flight: truth, radar frames and RF attempts on one UTC timeline, plus load reports.
+
+    ``truth`` is the first UAV's log (vehicle :data:`FIRST_VEHICLE`); ``vehicles`` holds every
+    UAV's log by vehicle name, the first UAV first (a single-UAV flight: just ``uav1``; left
+    empty by a caller, it is filled with ``{"uav1": truth}``).
+    """
 
     name: str
     truth: list[TruthFix]
@@ -146,9 +155,15 @@ class Flight:
     rf: list[RfAttempt]
     reports: dict[str, LoadReport] = field(default_factory=dict)
     folder: Path | None = None
+    vehicles: dict[str, list[TruthFix]] = field(default_factory=dict)
 
-    def truth_arrays(self) -> tuple[FloatArray, FloatArray]:
-        """(t[N], enu[N, 3]) of the truth samples, sorted by time."""
-        t = np.array([f.t for f in self.truth], dtype=float)
-        enu = np.array([(f.e, f.n, f.u) for f in self.truth], dtype=float).reshape(-1, 3)
+    def __post_init__(self) -> None:
+        if not self.vehicles:
+            self.vehicles = {FIRST_VEHICLE: self.truth}
+
+    def truth_arrays(self, vehicle: str | None = None) -> tuple[FloatArray, FloatArray]:
+        """(t[N], enu[N, 3]) of one UAV's truth samples (default: the first UAV's)."""
+        fixes = self.truth if vehicle is None else self.vehicles[vehicle]
+        t = np.array([f.t for f in fixes], dtype=float)
+        enu = np.array([(f.e, f.n, f.u) for f in fixes], dtype=float).reshape(-1, 3)
         return t, enu
