@@ -1,0 +1,495 @@
+"""Several UAVs at once: every confirmed UAV track with a stable id and a UAV probability.
+
+Built from the single-UAV tracker's parts (:mod:`~uav_fusion.core.estimator.tracker`): the
+profile's motion filter, measurement models, robust weight, NIS gate, deleter and M-of-N
+confirmation, and the radar object table with its UAV score
+(:mod:`~uav_fusion.core.estimator.association`), which already follows every radar object.
+
+Per radar frame (one time for all reports):
+
+1. every finite report updates its radar object; reports beyond the range gate, coasted
+   reports (with ``association.skip_radar_coasts``) and reports of objects scoring below
+   ``follow_min`` are not candidates;
+2. every track is predicted to the frame's time (the deleter drops a track whose last
+   accepted measurement is older than ``max_coast_s``);
+3. tracks and candidates are assigned one to one (global nearest neighbour: Hungarian
+   assignment on the position NIS plus ``velocity_weight`` times the NIS of the velocity the
+   radar reports for its track against the track's velocity (two UAVs crossing are close
+   in position but not in velocity), less ``continuity_bonus`` for the radar object the
+   track took last (0 by default: the radar's own tracker swaps ids at crossings);
+   pairs outside the NIS gate forbidden. Unlike the single-UAV tracker the UAV score is not
+   in the cost: it tells a UAV from clutter, not one UAV from another); an assigned report
+   updates its track (robust weight); a confirmed track whose own radar object reported
+   outside its gate counts a rejection (``max_consecutive_rejections`` drop it);
+4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
+   ``init_min_reports`` reports), has been seen for ``birth_age_s`` (default: the score's
+   ``stationary_min_age_s``, so that the stationary-clutter cue has had its chance) or has RF
+   support, and lies outside the gate of every track starts a new confirmed track from its
+   object's state;
+5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
+   for ``merge_s`` are one UAV, unless both were updated within ``merge_s`` by different
+   radar objects (two UAVs passing each other): the younger is dropped.
+
+An RF fix (``ok`` attempts) first credits the radar objects it agrees with. It belongs to its
+emitter, keyed by centre frequency: a track that has an emitter takes only that emitter's
+fixes (inside its gate: update; outside: a rejection); a fix of an emitter no track has yet
+goes to the nearest track without an emitter whose gate it falls in, which then carries that
+emitter; otherwise it starts a tentative track of that emitter, confirmed by M of N fixes as
+in the single-UAV tracker. A fix without a frequency is one emitter of its own ("unknown").
+
+A track's UAV probability is the logistic of the UAV score of the radar object it last took
+(0.5 without one), raised for a track with an emitter: ``1 - (1 - p) * emitter_doubt``
+(a control link on a drone band is strong evidence of a UAV).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import linear_sum_assignment
+
+from uav_fusion.core.estimator.association import ObjectTable, RadarObject
+from uav_fusion.core.estimator.components import Deleter, MofN, PolarRadarR, scale_packed
+from uav_fusion.core.estimator.filters import MotionFilter
+from uav_fusion.core.estimator.kalman import PackedR, expand_upper
+from uav_fusion.core.estimator.profile import Profile
+from uav_fusion.core.estimator.track import nis_gate
+from uav_fusion.core.estimator.tracker import (
+    motion_filter_from_profile,
+    radar_model_from_profile,
+    rf_model_from_profile,
+    robust_from_profile,
+)
+from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
+from uav_fusion.core.site import Site
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Emitter key of RF fixes without a centre frequency.
+UNKNOWN_EMITTER = "unknown"
+_FORBIDDEN = 1.0e9
+
+
+def emitter_key(freq_hz: float | None) -> str:
+    """The emitter a fix belongs to: its centre frequency in whole kHz, or ``unknown``."""
+    if freq_hz is None or not math.isfinite(freq_hz):
+        return UNKNOWN_EMITTER
+    return f"{round(freq_hz / 1e3):d}kHz"
+
+
+@dataclass(frozen=True)
+class MultiSettings:
+    """What the multi-UAV tracker adds to a tracker profile."""
+
+    merge_nis: float = 3.0  # two tracks this close (NIS, 3 dof) are candidates for a merge
+    merge_s: float = 3.0  # ... and are merged after this long
+    emitter_doubt: float = 0.1  # 1 - P(UAV) is multiplied by this for a track with an emitter
+    birth_age_s: float | None = None  # None: the score's stationary_min_age_s
+    continuity_bonus: float = 0.0  # NIS credit for the radar object a track took last
+    velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
+    velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
+
+
+class UavTrack:
+    """One UAV track."""
+
+    __slots__ = (
+        "born_t",
+        "close_since",
+        "confirmed",
+        "emitter",
+        "filter",
+        "followed",
+        "id",
+        "last_radar_t",
+        "last_update_t",
+        "mofn",
+        "n_updates",
+        "rejections",
+        "score",
+        "t",
+    )
+
+    def __init__(self, track_id: int, t: float, f: MotionFilter, confirmed: bool) -> None:
+        self.id = track_id
+        self.born_t = t
+        self.t = t
+        self.filter = f
+        self.confirmed = confirmed
+        self.last_update_t = t
+        self.last_radar_t: float | None = None
+        self.followed: int | None = None
+        self.emitter: str | None = None
+        self.mofn: MofN | None = None
+        self.n_updates = 1
+        self.rejections = 0
+        self.score = 0.0
+        self.close_since: dict[int, float] = {}
+
+
+@dataclass(frozen=True)
+class TrackOutput:
+    """One confirmed track at a time: id, state, covariance, UAV probability, emitter."""
+
+    track_id: int
+    t: float
+    x: FloatArray
+    P: FloatArray
+    uav_prob: float
+    emitter: str | None
+    radar_object: int | None
+    last_update_t: float
+
+
+class MultiTracker:
+    """Every UAV at once (see the module text)."""
+
+    def __init__(self, profile: Profile, site: Site, settings: MultiSettings | None = None) -> None:
+        self.profile = profile
+        self.settings = settings or MultiSettings()
+        self.cfg = profile.score
+        self.radar_r = radar_model_from_profile(profile, site)
+        self.rf_r = rf_model_from_profile(profile)
+        self.robust = robust_from_profile(profile)
+        r_obj = self.radar_r
+        self._extra_var = 0.0
+        if isinstance(r_obj, PolarRadarR):
+            f_obj = min(r_obj.floor_m, self.cfg.object_floor_m)
+            self._extra_var = r_obj.floor_m**2 - f_obj**2
+            r_obj = replace(r_obj, floor_m=f_obj)
+        self._r_obj = r_obj
+        self.objects = ObjectTable(self.cfg, r_obj)
+        self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
+        self._g2 = nis_gate(profile.nis_probability, 2)
+        self._g3 = nis_gate(profile.nis_probability, 3)
+        gate = profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
+        self._gate2 = float(gate) ** 2
+        self._radar_pos = tuple(float(v) for v in site.radar.enu)
+        self.tracks: list[UavTrack] = []
+        self._next_id = 1
+        self.counters: dict[str, int] = {}
+
+    # --- output ---------------------------------------------------------------------------
+    def _count(self, key: str, n: int = 1) -> None:
+        self.counters[key] = self.counters.get(key, 0) + n
+
+    def uav_prob(self, tr: UavTrack) -> float:
+        p = 0.5 if tr.followed is None else 1.0 / (1.0 + math.exp(-max(-30.0, min(30.0, tr.score))))
+        if tr.emitter is not None:
+            p = 1.0 - (1.0 - p) * self.settings.emitter_doubt
+        return p
+
+    def outputs(self, t: float | None = None) -> list[TrackOutput]:
+        """Every confirmed track, predicted to ``t`` (default: its own time) without changing
+        it, highest UAV probability first."""
+        out: list[TrackOutput] = []
+        for tr in self.tracks:
+            if not tr.confirmed:
+                continue
+            f = tr.filter
+            at = tr.t
+            if t is not None and t > tr.t:
+                f = f.copy()
+                f.predict(t - tr.t)
+                at = t
+            x, p = f.mean()
+            out.append(
+                TrackOutput(
+                    tr.id, at, np.array(x, dtype=float), expand_upper(p), self.uav_prob(tr),
+                    tr.emitter, tr.followed, tr.last_update_t,
+                )
+            )  # fmt: skip
+        out.sort(key=lambda o: (-o.uav_prob, o.track_id))
+        return out
+
+    # --- track life ------------------------------------------------------------------------
+    def _new_track(self, t: float, x: list[float], P: FloatArray, confirmed: bool) -> UavTrack:
+        f = motion_filter_from_profile(self.profile)
+        f.set_state(x, P)
+        tr = UavTrack(self._next_id, t, f, confirmed)
+        self._next_id += 1
+        self.tracks.append(tr)
+        self._count("started" if confirmed else "tentative_started")
+        return tr
+
+    def _drop(self, tr: UavTrack, reason: str) -> None:
+        self.tracks.remove(tr)
+        self._count(f"dropped_{reason}")
+
+    def _advance(self, t: float) -> None:
+        for tr in list(self.tracks):
+            if t < tr.t:
+                continue
+            if self.deleter.coast_expired(t, tr.last_update_t):
+                self._drop(tr, "max_coast")
+                continue
+            if t > tr.t:
+                tr.filter.predict(t - tr.t)
+                tr.t = t
+
+    def _reject(self, tr: UavTrack) -> None:
+        tr.rejections += 1
+        self._count("rejected_nis")
+        if tr.confirmed and self.deleter.too_many_rejections(tr.rejections):
+            self._drop(tr, "max_rejections")
+
+    def _accept(self, tr: UavTrack, t: float) -> None:
+        tr.last_update_t = t
+        tr.rejections = 0
+        tr.n_updates += 1
+        self._count("updated")
+
+    # --- radar ------------------------------------------------------------------------------
+    def process_radar_frame(self, frame: RadarFrame) -> None:
+        t = frame.t
+        cfg = self.cfg
+        dv = self._extra_var
+        rx, ry, rz = self._radar_pos
+        cands: list[tuple[RadarTrack, RadarObject, float, PackedR]] = []
+        for trk in frame.tracks:
+            self._count("radar_reports")
+            if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
+                self._count("rejected_invalid")
+                continue
+            ro = self._r_obj.r_at(trk.e, trk.n, trk.u)
+            obj = self.objects.update(trk, ro)
+            r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
+            d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
+            if d2 > self._gate2 or (obj.coasting and cfg.skip_radar_coasts):
+                continue
+            s = obj.score(cfg)
+            if s >= cfg.follow_min:
+                cands.append((trk, obj, s, r))
+        self._advance(t)
+        live = [tr for tr in self.tracks if tr.t <= t]
+        nis = np.full((len(live), len(cands)), math.inf)
+        for a, tr in enumerate(live):
+            for b, (trk, _obj, _s, r) in enumerate(cands):
+                nis[a, b] = tr.filter.nis((trk.e, trk.n, trk.u), r)
+        taken: set[int] = set()
+        if live and cands:
+            # NIS, less a bonus for the object the track followed last; the UAV score only
+            # decides who may update a track (follow_min): between two UAVs it says nothing
+            same = np.array(
+                [[c[0].track_id == tr.followed for c in cands] for tr in live], dtype=bool
+            )
+            cost = nis - self.settings.continuity_bonus * same
+            wv = self.settings.velocity_weight
+            if wv > 0.0:
+                s2 = self.settings.velocity_sigma_mps**2
+                for a, tr in enumerate(live):
+                    x, pk = tr.filter.mean()
+                    for b, c in enumerate(cands):
+                        if nis[a, b] <= self._g3:
+                            cost[a, b] += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
+            cost = np.where(nis <= self._g3, cost, _FORBIDDEN)
+            rows, cols = linear_sum_assignment(cost)
+            for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
+                if cost[a, b] >= _FORBIDDEN:
+                    continue
+                tr = live[a]
+                trk, obj, s, r = cands[b]
+                w = self.robust.weight(float(nis[a, b]), 3)
+                tr.filter.update((trk.e, trk.n, trk.u), scale_packed(r, 1.0 / w) if w != 1.0 else r)
+                self._accept(tr, t)
+                if not tr.confirmed:
+                    tr.confirmed = True
+                    tr.mofn = None
+                    self._count("confirmed")
+                tr.followed = trk.track_id
+                tr.last_radar_t = t
+                tr.score = s
+                taken.add(b)
+        # a confirmed track whose own object reported outside its gate: a rejection
+        for a, tr in enumerate(live):
+            if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
+                continue
+            for b, (trk, _obj, _s, _r) in enumerate(cands):
+                if trk.track_id == tr.followed and nis[a, b] > self._g3:
+                    self._reject(tr)
+                    break
+        # strong objects that no track explains start tracks
+        birth_age = self.settings.birth_age_s
+        if birth_age is None:
+            birth_age = cfg.stationary_min_age_s
+        for b, (trk, obj, s, _r) in enumerate(cands):
+            if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
+                continue
+            if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
+                continue
+            if any(nis[a, b] <= self._g3 for a in range(len(live))):
+                continue
+            kf = obj.kf
+            assert kf is not None
+            tr = self._new_track(t, list(kf.x), expand_upper(kf.P), confirmed=True)
+            tr.followed = trk.track_id
+            tr.last_radar_t = t
+            tr.score = s
+        self._merge(t)
+
+    def _merge(self, t: float) -> None:
+        conf = [tr for tr in self.tracks if tr.confirmed]
+        st = self.settings
+        for i, a in enumerate(conf):
+            for b in conf[i + 1 :]:
+                if a not in self.tracks or b not in self.tracks:
+                    continue
+                xa, pa = a.filter.mean()
+                xb, pb = b.filter.mean()
+                d = np.array(xa[:3]) - np.array(xb[:3])
+                S = expand_upper(pa)[:3, :3] + expand_upper(pb)[:3, :3]
+                try:
+                    m = float(d @ np.linalg.solve(S, d))
+                except np.linalg.LinAlgError:
+                    continue
+                if m > st.merge_nis:
+                    a.close_since.pop(b.id, None)
+                    continue
+                since = a.close_since.setdefault(b.id, t)
+                if t - since < st.merge_s:
+                    continue
+                ra, rb = a.last_radar_t, b.last_radar_t
+                if (
+                    ra is not None
+                    and rb is not None
+                    and t - ra <= st.merge_s
+                    and t - rb <= st.merge_s
+                    and a.followed != b.followed
+                ):
+                    continue  # two objects side by side: two UAVs
+                # keep the older track; it inherits the younger one's emitter
+                keep, lose = (a, b) if (a.born_t, a.id) <= (b.born_t, b.id) else (b, a)
+                if keep.emitter is None:
+                    keep.emitter = lose.emitter
+                self._drop(lose, "merged")
+
+    # --- RF -----------------------------------------------------------------------------------
+    def process_rf(self, att: RfAttempt) -> None:
+        if not att.ok or not math.isfinite(att.t + att.e + att.n):
+            return
+        t = att.t
+        self._count("rf_fixes")
+        max_cep = self.profile.rf_max_cep_m
+        if max_cep is not None and att.cep is not None and att.cep > max_cep:
+            self._count("rejected_cep")
+            return
+        r = self.rf_r.r_for(att.cep, att.valid_sensors)
+        z = (att.e, att.n)
+        self.objects.rf_fix(t, att.e, att.n, 0.5 * (r[0] + r[2]))
+        self._advance(t)
+        em = emitter_key(att.center_freq_hz)
+        own = [tr for tr in self.tracks if tr.emitter == em and tr.t <= t]
+        if own:
+            tr = min(own, key=lambda x: (not x.confirmed, x.id))
+            self._rf_to(tr, t, z, r)
+            return
+        free = [
+            (tr.filter.nis(z, r), tr.id, tr)
+            for tr in self.tracks
+            if tr.emitter is None and tr.confirmed and tr.t <= t
+        ]
+        free = [e for e in free if e[0] <= self._g2]
+        if free:
+            _, _, tr = min(free, key=lambda e: (e[0], e[1]))
+            tr.emitter = em
+            self._count("emitter_linked")
+            self._rf_to(tr, t, z, r)
+            return
+        p = self.profile
+        P = np.zeros((6, 6))
+        P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
+        P[2, 2] = p.rf_init_altitude_std_m**2
+        P[3, 3] = P[4, 4] = P[5, 5] = p.init_velocity_std_mps**2
+        tentative = p.confirm_m > 1
+        tr = self._new_track(t, [z[0], z[1], p.rf_init_altitude_m, 0.0, 0.0, 0.0], P, not tentative)
+        tr.emitter = em
+        if tentative:
+            tr.mofn = MofN(p.confirm_m, p.confirm_n)
+
+    def _rf_to(self, tr: UavTrack, t: float, z: tuple[float, float], r: PackedR) -> None:
+        f = tr.filter
+        n = f.nis(z, r)
+        hit = n <= self._g2
+        if hit:
+            w = self.robust.weight(n, 2)
+            f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
+            self._accept(tr, t)
+        if tr.mofn is not None:
+            state = tr.mofn.record(hit)
+            if state == "confirmed":
+                tr.confirmed = True
+                tr.mofn = None
+                self._count("confirmed")
+            elif state == "failed":
+                self._drop(tr, "unconfirmed")
+            return
+        if not hit:
+            self._reject(tr)
+
+
+@dataclass(frozen=True)
+class GridEpoch:
+    """The confirmed tracks at one grid time."""
+
+    t: float
+    tracks: tuple[TrackOutput, ...]
+
+
+def run_multi(
+    tracker: MultiTracker,
+    stream: list[RadarFrame | RfAttempt],
+    grid_hz: float,
+    t_start: float,
+    t_end: float,
+) -> list[GridEpoch]:
+    """Feed ``stream`` (time order) through ``tracker`` and take its confirmed tracks at every
+    grid time ``t_start + k / grid_hz`` up to ``t_end``, as soon as processed time passes it:
+    each track predicted to the epoch, while its last accepted measurement is at most the
+    profile's ``max_coast_s`` old."""
+    if not grid_hz > 0:
+        raise ValueError(f"grid rate must be > 0, got {grid_hz}")
+    step = 1.0 / grid_hz
+    n_epochs = math.floor((t_end - t_start) * grid_hz + 1e-9) + 1 if t_end >= t_start else 0
+    max_coast = tracker.profile.max_coast_s
+    out: list[GridEpoch] = []
+    k = 0
+
+    def emit(until: float) -> None:
+        nonlocal k
+        while k < n_epochs and t_start + k * step <= until:
+            g = t_start + k * step
+            tracks = tuple(
+                o
+                for o in tracker.outputs(g)
+                if o.t <= g and (max_coast is None or g - o.last_update_t <= max_coast)
+            )
+            out.append(GridEpoch(g, tracks))
+            k += 1
+
+    for item in stream:
+        emit(item.t if item.t < t_end else t_end)
+        if isinstance(item, RadarFrame):
+            tracker.process_radar_frame(item)
+        else:
+            tracker.process_rf(item)
+    emit(t_end)
+    return out
+
+
+def velocity_nis(
+    x: list[float], p: list[float], vel_ned: tuple[float, float, float] | None, s2: float
+) -> float:
+    """NIS (3 dof) of a reported NED velocity against the velocity of the state ``x`` whose
+    6x6 covariance is packed in ``p`` (upper triangle by rows), plus ``s2`` on each axis; 0
+    for a report without a velocity."""
+    if vel_ned is None:
+        return 0.0
+    d = np.array((vel_ned[1] - x[3], vel_ned[0] - x[4], -vel_ned[2] - x[5]))
+    S = expand_upper(p)[3:6, 3:6] + s2 * np.eye(3)
+    try:
+        return float(d @ np.linalg.solve(S, d))
+    except np.linalg.LinAlgError:
+        return 0.0
