@@ -339,8 +339,10 @@ class MultiTracker:
                     continue
                 xa, pa = a.filter.mean()
                 xb, pb = b.filter.mean()
-                d = np.array(xa[:3]) - np.array(xb[:3])
-                S = expand_upper(pa)[:3, :3] + expand_upper(pb)[:3, :3]
+                # a track without a recent radar update has no altitude worth comparing
+                k = 3 if self._radar_recent(a, t) and self._radar_recent(b, t) else 2
+                d = np.array(xa[:k]) - np.array(xb[:k])
+                S = expand_upper(pa)[:k, :k] + expand_upper(pb)[:k, :k]
                 try:
                     m = float(d @ np.linalg.solve(S, d))
                 except np.linalg.LinAlgError:
@@ -365,6 +367,9 @@ class MultiTracker:
                 if keep.emitter is None:
                     keep.emitter = lose.emitter
                 self._drop(lose, "merged")
+
+    def _radar_recent(self, tr: UavTrack, t: float) -> bool:
+        return tr.last_radar_t is not None and t - tr.last_radar_t <= self.settings.merge_s
 
     # --- RF -----------------------------------------------------------------------------------
     def process_rf(self, att: RfAttempt) -> None:
@@ -411,6 +416,12 @@ class MultiTracker:
 
     def _rf_to(self, tr: UavTrack, t: float, z: tuple[float, float], r: PackedR) -> None:
         f = tr.filter
+        hold = self.profile.vz_hold_after_s
+        if hold is not None and (tr.last_radar_t is None or t - tr.last_radar_t > hold):
+            # no 3D measurement for a while: hold the climb rate near 0 (as the single-UAV
+            # tracker does) instead of letting a stale one run away
+            sd = self.profile.vz_hold_sigma_mps
+            f.update_scalar(5, 0.0, sd * sd)
         n = f.nis(z, r)
         hit = n <= self._g2
         if hit:
