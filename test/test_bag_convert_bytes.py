@@ -19,7 +19,12 @@ from rosbags.highlevel import AnyReader
 from uav_fusion.bag.convert import TYPES, convert_flight, topic_name
 from uav_fusion.bag.writer import jazzy_typestore
 from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.radar_choice import radar_profile, raw_radar_reports, selected_radar
+from uav_fusion.core.radar_choice import (
+    radar_profile,
+    raw_radar_reports,
+    report_covariance,
+    selected_radar,
+)
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
@@ -58,8 +63,13 @@ def _rclpy_stream() -> list[tuple[str, int, bytes]]:
             items.append((m.t, len(items), "radar/pose", cv.radar_measurement_to_msg(m, frame, R)))
     for trk in raw_radar_reports(flight, prof):
         items.append((trk.t, len(items), "radar/raw", cv.radar_track_to_msg(trk, R, frame)))
+    cov = report_covariance(prof, site)
+    for fr in flight.radar:
+        msg = cv.radar_frame_to_cloud_msg(fr, frame, cov)
+        items.append((fr.t, len(items), "radar/tracks", msg))
     for a in flight.rf:
         items.append((a.t, len(items), "rf/fix", cv.rf_attempt_to_msg(a, frame)))
+        items.append((a.t, len(items), "rf/fixes", cv.rf_attempts_to_cloud_msg([a], frame)))
     for f in flight.truth:
         items.append((f.t, len(items), "truth/fix", cv.truth_to_navsatfix(f, "gps")))
     items.sort(key=lambda it: (it[0], it[1]))

@@ -8,6 +8,7 @@ import itertools
 import math
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -305,9 +306,34 @@ def test_convert_flight_writes_what_the_replay_nodes_publish(tmp_path: Path) -> 
     assert {t: v.count for t, v in r.topics.items()} == {
         "/uav/radar/pose": len(selected),
         "/uav/radar/raw": len(raw),
+        "/uav/radar/tracks": len(flight.radar),
         "/uav/rf/fix": len(flight.rf),
+        "/uav/rf/fixes": len(flight.rf),
         "/uav/truth/fix": len(flight.truth),
     }
+    # every report of every frame and every attempt with its quality, decoded losslessly
+    from sensor_msgs.msg import PointCloud2
+
+    from uav_fusion.ros.conversions import msg_to_radar_frame, msg_to_rf_attempts
+
+    frames = [
+        msg_to_radar_frame(deserialize_message(m.data, PointCloud2), site.frame_id)
+        for m in r.messages(["/uav/radar/tracks"])
+    ]
+    for (got, dropped), fr in zip(frames, flight.radar, strict=True):
+        assert not dropped and got.t == fr.t
+        def key(x: Any) -> tuple[Any, ...]:
+            return (x.track_id, x.e, x.n, x.u, x.vel_ned, x.uav_prob, x.rcs_dbsm)
+
+        assert [key(x) for x in got.tracks] == [key(x) for x in fr.tracks]
+    attempts = [
+        msg_to_rf_attempts(deserialize_message(m.data, PointCloud2), site.frame_id)[0][0]
+        for m in r.messages(["/uav/rf/fixes"])
+    ]
+    for got_a, a in zip(attempts, flight.rf, strict=True):
+        assert (got_a.t, got_a.ok, got_a.cep, got_a.valid_sensors, got_a.center_freq_hz) == (
+            a.t, a.ok, a.cep, a.valid_sensors, a.center_freq_hz,
+        )
     assert np.array_equal(res.radar_cov, prof.r_radar)
     poses = [
         deserialize_message(m.data, PoseWithCovarianceStamped)

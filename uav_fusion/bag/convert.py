@@ -7,8 +7,12 @@ The bag holds exactly what the replay nodes would publish for the same flight an
 - ``radar/pose``: the radar reports the profile's track selection keeps (paper: the largest
   continuous track), ``geometry_msgs/PoseWithCovarianceStamped``;
 - ``radar/raw``: every UAV-class radar report, before selection, same type;
+- ``radar/tracks``: every report of every radar frame, one ``sensor_msgs/PointCloud2`` per
+  frame (layout :mod:`uav_fusion.core.clouds`, covariance from the profile's radar model);
 - ``rf/fix``: every RF localisation attempt, ``geometry_msgs/PointStamped`` (NaN for a
   failed attempt);
+- ``rf/fixes``: the same attempts with CEP, sensor counts, centre frequency and RHO, one
+  ``sensor_msgs/PointCloud2`` each;
 - ``truth/fix``: the RTK truth, ``sensor_msgs/NavSatFix``.
 
 Topic names sit under an optional namespace. Every message is stored at its sensor UTC time
@@ -33,8 +37,14 @@ import numpy.typing as npt
 
 from uav_fusion.bag.writer import BagWriter, WrittenBag, jazzy_typestore
 from uav_fusion.core import encoding as enc
+from uav_fusion.core.clouds import Cloud, radar_frame_to_cloud, rf_attempts_to_cloud
 from uav_fusion.core.encoding import time_to_ns
-from uav_fusion.core.radar_choice import radar_profile, raw_radar_reports, selected_radar
+from uav_fusion.core.radar_choice import (
+    radar_profile,
+    raw_radar_reports,
+    report_covariance,
+    selected_radar,
+)
 from uav_fusion.core.records import Flight, RfAttempt, TruthFix
 from uav_fusion.core.site import Site
 
@@ -43,13 +53,17 @@ FloatArray = npt.NDArray[np.float64]
 #: Topic leaf names (docs/graph.md).
 RADAR_POSE = "radar/pose"
 RADAR_RAW = "radar/raw"
+RADAR_TRACKS = "radar/tracks"
 RF_FIX = "rf/fix"
+RF_FIXES = "rf/fixes"
 TRUTH_FIX = "truth/fix"
 #: Message type of every topic.
 TYPES = {
     RADAR_POSE: "geometry_msgs/msg/PoseWithCovarianceStamped",
     RADAR_RAW: "geometry_msgs/msg/PoseWithCovarianceStamped",
+    RADAR_TRACKS: "sensor_msgs/msg/PointCloud2",
     RF_FIX: "geometry_msgs/msg/PointStamped",
+    RF_FIXES: "sensor_msgs/msg/PointCloud2",
     TRUTH_FIX: "sensor_msgs/msg/NavSatFix",
 }
 
@@ -92,8 +106,7 @@ def convert_flight(
     prof = radar_profile(profile, track_selection)
     R = np.asarray(prof.r_radar, dtype=float)
     frame = site.frame_id
-    names = {leaf: topic_name(namespace, leaf)
-             for leaf in (RADAR_POSE, RADAR_RAW, RF_FIX, TRUTH_FIX)}
+    names = {leaf: topic_name(namespace, leaf) for leaf in TYPES}
     ts = jazzy_typestore()
     msgs = CdrMessages(ts)
     # (time, order, leaf, message): one stable time order across the four streams
@@ -105,8 +118,13 @@ def convert_flight(
     for trk in raw_radar_reports(flight, prof):
         pos = (trk.e, trk.n, trk.u)
         items.append((trk.t, len(items), RADAR_RAW, msgs.radar_pose(trk.t, pos, R, frame)))
+    cov = report_covariance(prof, site)
+    for fr in flight.radar:
+        items.append((fr.t, len(items), RADAR_TRACKS,
+                      msgs.cloud(fr.t, radar_frame_to_cloud(fr, cov), frame)))
     for a in flight.rf:
         items.append((a.t, len(items), RF_FIX, msgs.rf_fix(a, frame)))
+        items.append((a.t, len(items), RF_FIXES, msgs.cloud(a.t, rf_attempts_to_cloud([a]), frame)))
     for f in flight.truth:
         items.append((f.t, len(items), TRUTH_FIX, msgs.truth_fix(f, truth_frame)))
     items.sort(key=lambda it: (it[0], it[1]))
@@ -159,6 +177,8 @@ class CdrMessages:
         self._point_stamped = t["geometry_msgs/msg/PointStamped"]
         self._status = t["sensor_msgs/msg/NavSatStatus"]
         self._fix = t["sensor_msgs/msg/NavSatFix"]
+        self._cloud = t["sensor_msgs/msg/PointCloud2"]
+        self._field = t["sensor_msgs/msg/PointField"]
 
     def header(self, t: float, frame_id: str) -> Any:
         sec, nsec = enc.stamp_parts(t)
@@ -178,6 +198,23 @@ class CdrMessages:
         cov = np.array(enc.pose_covariance(Rm.tolist()), dtype=np.float64)
         return self._pose_stamped(
             header=self.header(t, frame_id), pose=self._pose_cov(pose=pose, covariance=cov)
+        )
+
+    def cloud(self, t: float, cloud: Cloud, frame_id: str) -> Any:
+        """A core :class:`~uav_fusion.core.clouds.Cloud` as a stamped PointCloud2."""
+        return self._cloud(
+            header=self.header(t, frame_id),
+            height=1,
+            width=cloud.width,
+            fields=[
+                self._field(name=f.name, offset=f.offset, datatype=f.datatype, count=f.count)
+                for f in cloud.fields
+            ],
+            is_bigendian=False,
+            point_step=cloud.point_step,
+            row_step=cloud.row_step,
+            data=np.frombuffer(cloud.data, dtype=np.uint8),
+            is_dense=False,
         )
 
     def rf_fix(self, a: RfAttempt, frame_id: str) -> Any:

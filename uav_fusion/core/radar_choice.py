@@ -11,13 +11,20 @@ Two streams come out of a flight's radar file (``docs/graph.md``):
   ``evaluation.raw_radar_min_mean_uav_prob`` (:mod:`uav_fusion.core.radar_class`), before
   selection: the evaluator's "radar raw" row.
 
-Users: ``radar_replay`` (``radar/pose`` and ``radar/raw``), the bag converter (the same two
-topics), ``uav_fusion evaluate`` and ``uav_fusion calibrate`` (the UAV-class rule).
+A third stream carries every report of every frame, unselected: ``radar/tracks``
+(:mod:`uav_fusion.core.clouds`), each report with the covariance of :func:`report_covariance`.
+
+Users: ``radar_replay`` (``radar/pose``, ``radar/raw``, ``radar/tracks``), the bag converter
+(the same three topics), ``uav_fusion evaluate`` and ``uav_fusion calibrate`` (the UAV-class
+rule).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from uav_fusion.core.estimator import Profile, flight_measurements, load_profile
+from uav_fusion.core.estimator.kalman import PackedR
 from uav_fusion.core.radar_class import uav_class_tracks
 from uav_fusion.core.records import RADAR, Flight, Measurement, RadarTrack
 from uav_fusion.core.site import Site
@@ -49,3 +56,12 @@ def selected_radar(flight: Flight, profile: Profile, site: Site) -> list[list[Me
 def raw_radar_reports(flight: Flight, profile: Profile) -> list[RadarTrack]:
     """The UAV reports of the raw radar row (the profile's per-track mean rule)."""
     return uav_class_tracks(flight.radar, profile.raw_radar_min_mean_uav_prob)
+
+
+def report_covariance(profile: Profile, site: Site) -> Callable[[float, float, float], PackedR]:
+    """The ENU covariance (packed upper triangle xx, xy, xz, yy, yz, zz) that ``profile``'s
+    radar model gives a report at (e, n, u): the fixed R of the paper profile, the polar
+    model's R of a tracker profile. Published with every report on ``radar/tracks``."""
+    from uav_fusion.core.estimator.tracker import radar_model_from_profile
+
+    return radar_model_from_profile(profile, site).r_at

@@ -9,10 +9,15 @@ Two streams (see ``docs/graph.md``):
   share one stamp.
 - ``radar/raw``: every UAV report of every frame, before selection (the evaluator's
   "radar raw" row, :func:`uav_fusion.core.radar_choice.raw_radar_reports`).
+- ``radar/tracks`` (sensor_msgs/PointCloud2): every report of every frame, one cloud per
+  frame, with velocity, radar track id, UAV class probability, RCS, range, Doppler and the
+  report's covariance from the profile's radar model (layout: :mod:`uav_fusion.core.clouds`):
+  what the tracker profiles consume.
 
 Covariance: the measurement's own R, else the profile's radar R. Stamps: the radar frame's
 UTC time. Parameters: :func:`uav_fusion.ros.replay.replay_params` plus ``profile``,
-``track_selection``, ``radar_topic``, ``radar_raw_topic``.
+``track_selection``, ``radar_topic``, ``radar_raw_topic``, ``publish_raw``,
+``radar_tracks_topic``, ``publish_tracks``.
 """
 
 from __future__ import annotations
@@ -23,9 +28,15 @@ from typing import Any
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.publisher import Publisher
+from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.core.estimator.profile import SELECTIONS
-from uav_fusion.core.radar_choice import radar_profile, raw_radar_reports, selected_radar
+from uav_fusion.core.radar_choice import (
+    radar_profile,
+    raw_radar_reports,
+    report_covariance,
+    selected_radar,
+)
 from uav_fusion.ros import conversions as cv
 from uav_fusion.ros.params import Param
 from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
@@ -51,6 +62,8 @@ class RadarReplay(ReplayNode):
                 topic_param("radar_topic", "radar/pose", "selected reports"),
                 topic_param("radar_raw_topic", "radar/raw", "every UAV-class report"),
                 Param("publish_raw", True, "publish the raw topic too"),
+                topic_param("radar_tracks_topic", "radar/tracks", "every report (PointCloud2)"),
+                Param("publish_tracks", True, "publish every report as PointCloud2 too"),
             ],
             **kwargs,
         )
@@ -59,6 +72,11 @@ class RadarReplay(ReplayNode):
         self.pub_raw = (
             self.create_publisher(PoseWithCovarianceStamped, self.p["radar_raw_topic"], self.qos)
             if self.p["publish_raw"]
+            else None
+        )
+        self.pub_tracks = (
+            self.create_publisher(PointCloud2, self.p["radar_tracks_topic"], self.qos)
+            if self.p["publish_tracks"]
             else None
         )
 
@@ -76,6 +94,13 @@ class RadarReplay(ReplayNode):
                 for trk in raw_radar_reports(self.flight, self.profile)
             ]
             out.append((self.pub_raw, raw))
+        if self.pub_tracks is not None:
+            cov = report_covariance(self.profile, self.site)
+            clouds = [
+                (fr.t, cv.radar_frame_to_cloud_msg(fr, self.frame_id, cov))
+                for fr in self.flight.radar
+            ]
+            out.append((self.pub_tracks, clouds))
         return out
 
 

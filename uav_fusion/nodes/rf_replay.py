@@ -1,8 +1,11 @@
 """rf_replay: publishes every RF localisation attempt as geometry_msgs/PointStamped.
 
 Topic ``rf/fix``: x = east, y = north (ENU metres, site frame), z = 0.0; a failed attempt
-is published as x = y = z = NaN so subscribers can count attempts. Stamps are the sensor's
-UTC times. Parameters: see :func:`uav_fusion.ros.replay.replay_params` and ``docs/graph.md``.
+is published as x = y = z = NaN so subscribers can count attempts. Topic ``rf/fixes``
+(sensor_msgs/PointCloud2, one point per attempt; layout :mod:`uav_fusion.core.clouds`): the
+same attempts with their CEP, valid and total sensor counts, measurement id, centre frequency
+and RHO, what the tracker profiles consume. Stamps are the sensor's UTC times. Parameters:
+see :func:`uav_fusion.ros.replay.replay_params` and ``docs/graph.md``.
 """
 
 from __future__ import annotations
@@ -13,8 +16,10 @@ from typing import Any
 
 from geometry_msgs.msg import PointStamped
 from rclpy.publisher import Publisher
+from sensor_msgs.msg import PointCloud2
 
-from uav_fusion.ros.conversions import rf_attempt_to_msg
+from uav_fusion.ros.conversions import rf_attempt_to_msg, rf_attempts_to_cloud_msg
+from uav_fusion.ros.params import Param
 from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
 
 NODE_NAME = "rf_replay"
@@ -27,13 +32,29 @@ class RfReplay(ReplayNode):
         super().__init__(
             NODE_NAME,
             publish_clock=False,
-            extra=[topic_param("rf_topic", "rf/fix", "PointStamped topic of the RF attempts")],
+            extra=[
+                topic_param("rf_topic", "rf/fix", "PointStamped topic of the RF attempts"),
+                topic_param("rf_fixes_topic", "rf/fixes", "every attempt with its quality"),
+                Param("publish_fixes", True, "publish the attempts as PointCloud2 too"),
+            ],
             **kwargs,
         )
         self.pub = self.create_publisher(PointStamped, self.p["rf_topic"], self.qos)
+        self.pub_fixes = (
+            self.create_publisher(PointCloud2, self.p["rf_fixes_topic"], self.qos)
+            if self.p["publish_fixes"]
+            else None
+        )
 
     def streams(self) -> list[tuple[Publisher, list[tuple[float, Any]]]]:
-        return [(self.pub, [(a.t, rf_attempt_to_msg(a, self.frame_id)) for a in self.flight.rf])]
+        fid = self.frame_id
+        out: list[tuple[Publisher, list[tuple[float, Any]]]] = [
+            (self.pub, [(a.t, rf_attempt_to_msg(a, fid)) for a in self.flight.rf])
+        ]
+        if self.pub_fixes is not None:
+            fixes = [(a.t, rf_attempts_to_cloud_msg([a], fid)) for a in self.flight.rf]
+            out.append((self.pub_fixes, fixes))
+        return out
 
 
 def main(args: Sequence[str] | None = None) -> int:
