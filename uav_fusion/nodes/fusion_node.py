@@ -21,11 +21,30 @@ attempts, ...) + the sum of ``dropped_<s>_<reason>`` and ``dropped_late_<s>`` (n
 reached the estimator) +
 ``buffer_pending`` + ``held_<s>`` (the last two are 0 after a flush).
 
-Publishes, for every filter step, nav_msgs/Odometry on ``fusion/odom`` and the same message
-on ``fusion/odom/updated`` or ``fusion/odom/coasted``; for every accepted measurement the
-measurement itself on ``fusion/accepted/radar`` or ``fusion/accepted/rf`` (passed every gate,
-NIS included; a measurement that only started the track is not "accepted"); and counters on
-``/diagnostics``. Malformed messages (NaN, bad covariance, wrong frame, zero stamp) are
+**Tracker profiles** (``association.mode: track_score``, e.g. ``tracker``) run the
+:class:`~uav_fusion.core.estimator.tracker.Tracker` instead, on every report of every radar
+frame and every RF attempt with its quality: the node subscribes ``radar/tracks`` and
+``rf/fixes`` (sensor_msgs/PointCloud2, :mod:`uav_fusion.core.clouds`) instead of
+``radar/pose`` and ``rf/fix``. Frames and attempts go through the same timeline, so the
+tracker sees them in the offline run's order (:func:`uav_fusion.core.estimator.runner.
+tracker_stream`); empty frames and failed attempts only move their stream on (offline they
+are skipped too). A malformed point is dropped and counted (``dropped_radar_point_<reason>``)
+and the message's good points are kept. ``fusion/odom`` then carries the **fixed-rate
+output**: at every ``1 / frequency`` epoch the processed time passes, the confirmed track
+predicted to the epoch with its covariance (:class:`uav_fusion.core.grid.StepGrid`, the
+function the benchmark scores, so live equals offline), while its last accepted measurement
+is at most ``max_coast_s`` old; when the inputs stall for ``stall_timeout_s`` (and nothing is
+buffered) the epochs up to the current time (simulated clock, else wall clock; at most
+``max_coast_s`` past the last processed time) are published too. ``fusion/odom/updated`` and
+``fusion/odom/coasted`` keep one message per filter step (what Table II reads).
+
+Paper profile: publishes, for every filter step, nav_msgs/Odometry on ``fusion/odom`` and
+the same message on ``fusion/odom/updated`` or ``fusion/odom/coasted``; for every accepted
+measurement the measurement itself on ``fusion/accepted/radar`` or ``fusion/accepted/rf``
+(passed every gate, NIS included; a measurement that only started the track is not
+"accepted"); and counters on ``/diagnostics`` (tracker profiles add the time since the last
+accepted measurement, the followed radar track, its UAV score and probability and the grid
+epochs published). Malformed messages (NaN, bad covariance, wrong frame, zero stamp) are
 dropped and counted by reason — never a traceback.
 """
 
@@ -49,12 +68,15 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
-from sensor_msgs.msg import NavSatFix
+from sensor_msgs.msg import NavSatFix, PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.estimator import FusionEstimator, Profile, load_profile
+from uav_fusion.core.estimator.runner import TrackerItem, feed_tracker, tracker_item
+from uav_fusion.core.estimator.tracker import Tracker, TrackerStep, radar_model_from_profile
+from uav_fusion.core.grid import GridState, StepGrid
 from uav_fusion.core.records import RADAR, RF, Measurement
 from uav_fusion.core.reorder import Batch, ReorderBuffer
 from uav_fusion.core.site import load_site
@@ -87,7 +109,20 @@ def fusion_params() -> list[Param]:
         topic("child_frame_id", "uav", "child frame id of the published Odometry"),
         topic("radar_topic", "radar/pose", "radar input (PoseWithCovarianceStamped)"),
         topic("rf_topic", "rf/fix", "RF input (PointStamped; NaN = failed attempt)"),
-        topic("odom_topic", "fusion/odom", "every filter step (Odometry)"),
+        topic("radar_tracks_topic", "radar/tracks", "tracker profiles' radar input (PointCloud2)"),
+        topic("rf_fixes_topic", "rf/fixes", "RF input of tracker profiles (PointCloud2)"),
+        Param(
+            "frequency", 10.0, "tracker profiles: rate of the fixed-rate output on fusion/odom",
+            lo=0.01, hi=1000.0,
+        ),
+        Param(
+            "stall_timeout_s", 1.0,
+            "tracker profiles: wall seconds without input (and nothing buffered) after which "
+            "fusion/odom is predicted up to the current time (0 = never)",
+            lo=0.0, hi=3600.0, read_only=False,
+        ),
+        topic("odom_topic", "fusion/odom",
+              "every filter step (paper profile) or the fixed-rate output (tracker profiles)"),
         topic("updated_topic", "fusion/odom/updated", "steps that updated (Odometry)"),
         topic("coasted_topic", "fusion/odom/coasted", "steps that coasted (Odometry)"),
         topic("accepted_radar_topic", "fusion/accepted/radar", "accepted radar measurements"),
@@ -169,7 +204,24 @@ class FusionNode(Node):
         self.profile: Profile = load_profile(self.p["profile"])
         self.frame = str(self.p["world_frame"] or self.site.frame_id)
         self.child_frame = str(self.p["child_frame_id"])
-        self.estimator = FusionEstimator(self.profile, self.site)
+        #: tracker profiles run the Tracker on radar/tracks + rf/fixes with fixed-rate output
+        self.tracker_mode = self.profile.uses_tracker
+        self.tracker: Tracker | None = None
+        self.grid: StepGrid | None = None
+        self.estimator: FusionEstimator | None = None
+        if self.tracker_mode:
+            self.tracker = Tracker(self.profile, self.site)
+            self.grid = StepGrid(self.profile, float(self.p["frequency"]))
+            self._radar_r = radar_model_from_profile(self.profile, self.site)
+            gate = self.profile.range_gate_m
+            range_gate = float(gate if gate is not None else self.site.radar.range_gate_m)
+        else:
+            self.estimator = FusionEstimator(self.profile, self.site)
+            range_gate = self.estimator.range_gate_m
+        #: grid epochs published on fusion/odom (tracker profiles)
+        self.grid_published = 0
+        self._processed_t = -math.inf
+        self._stall_s = float(self.p["stall_timeout_s"])
         self.received: Counter[str] = Counter()
         self.used: Counter[str] = Counter()
         self.refused: Counter[str] = Counter()  # "<source>_<reason>"
@@ -226,14 +278,17 @@ class FusionNode(Node):
         self.report_layer = ReportLayer(history=int(self.p["marker_history"]))
         self.visualization = Visualization(
             self.frame,
-            [SiteLayer(self.site, self.estimator.range_gate_m), self.report_layer,
-             self.track_layer],
+            [SiteLayer(self.site, range_gate), self.report_layer, self.track_layer],
         )
         self._views_dirty = True
         self._last_view = -math.inf
         self._last_step: Any = None
         self.paths_published = 0
         self.markers_published = 0
+        self.radar_topic = str(
+            self.p["radar_tracks_topic"] if self.tracker_mode else self.p["radar_topic"]
+        )
+        self.rf_topic = str(self.p["rf_fixes_topic"] if self.tracker_mode else self.p["rf_topic"])
         self.inputs = {
             src: InputMonitor(
                 topic,
@@ -242,21 +297,28 @@ class FusionNode(Node):
                 min_delay_s=float(self.p["stamp_delay_min_s"]),
                 max_delay_s=float(self.p["stamp_delay_max_s"]),
             )
-            for src, topic in ((RADAR, self.p["radar_topic"]), (RF, self.p["rf_topic"]))
+            for src, topic in ((RADAR, self.radar_topic), (RF, self.rf_topic))
         }
+        radar_type: Any = PointCloud2 if self.tracker_mode else PoseWithCovarianceStamped
+        rf_type: Any = PointCloud2 if self.tracker_mode else PointStamped
         self._sub_radar = self.create_subscription(
-            PoseWithCovarianceStamped, self.p["radar_topic"], self._on_radar, qos
+            radar_type, self.radar_topic, self._on_radar, qos
         )
-        self._sub_rf = self.create_subscription(PointStamped, self.p["rf_topic"], self._on_rf, qos)
+        self._sub_rf = self.create_subscription(rf_type, self.rf_topic, self._on_rf, qos)
         self.create_service(Trigger, self.p["flush_service"], self._on_flush)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._idle_timer = self.create_timer(0.1, self._on_tick, clock=steady)
         self._diag_timer = self.create_timer(
             float(self.p["diagnostics_period_s"]), self.publish_diagnostics, clock=steady
         )
+        mode = (
+            f", tracker with fixed-rate output at {float(self.p['frequency']):g} Hz"
+            if self.tracker_mode
+            else ""
+        )
         self.get_logger().info(
-            f"fusing {self.p['radar_topic']} + {self.p['rf_topic']} with profile "
-            f"'{self.profile.name}', reorder window {self.buffer.window_s:g} s"
+            f"fusing {self.radar_topic} + {self.rf_topic} with profile "
+            f"'{self.profile.name}'{mode}, reorder window {self.buffer.window_s:g} s"
         )
 
     @property
@@ -286,6 +348,8 @@ class FusionNode(Node):
                 self._idle_s = float(par.value)
             elif par.name == "view_period_s":
                 self._view_period = float(par.value)
+            elif par.name == "stall_timeout_s":
+                self._stall_s = float(par.value)
             elif par.name == "diagnostics_period_s" and par.value > 0:
                 self._diag_timer.timer_period_ns = int(par.value * 1e9)
 
@@ -328,7 +392,10 @@ class FusionNode(Node):
             else:
                 self._one_radar(radar.popleft())
 
-    def _one_radar(self, msg: PoseWithCovarianceStamped) -> None:
+    def _one_radar(self, msg: Any) -> None:
+        if self.tracker_mode:
+            self._one_radar_frame(msg)
+            return
         now, clock = self._now()
         timeline = self.timeline
         timeline.check_clock(clock)
@@ -346,7 +413,10 @@ class FusionNode(Node):
             m.R = None
         timeline.admit(RADAR, m.t, m, clock)
 
-    def _one_rf(self, msg: PointStamped) -> None:
+    def _one_rf(self, msg: Any) -> None:
+        if self.tracker_mode:
+            self._one_rf_fixes(msg)
+            return
         now, clock = self._now()
         timeline = self.timeline
         timeline.check_clock(clock)
@@ -363,6 +433,56 @@ class FusionNode(Node):
         self.inputs[RF].tick(now - t)
         # None = a failed attempt: the RF stream moved on, nothing to fuse
         timeline.admit(RF, t, m, clock)
+        timeline.release(clock)
+
+    def _count_points(self, source: str, bad: Counter[str]) -> None:
+        for reason, n in sorted(bad.items()):
+            self._count_drop(
+                source, f"point_{reason}",
+                f"dropping {source} point(s) that cannot be measurements ({reason})", n,
+            )  # fmt: skip
+
+    def _one_radar_frame(self, msg: PointCloud2) -> None:
+        """Tracker profiles: one radar/tracks cloud (every report of one frame)."""
+        now, clock = self._now()
+        timeline = self.timeline
+        timeline.check_clock(clock)
+        self._last_input = time.monotonic()
+        self.received[RADAR] += 1
+        try:
+            frame, bad = cv.msg_to_radar_frame(msg, self.frame)
+        except cv.MessageError as exc:
+            self._tick_input(RADAR, msg, now)
+            self._drop(RADAR, exc)
+            return
+        self._count_points(RADAR, bad)
+        self.received["radar_reports"] += len(frame.tracks) + sum(bad.values())
+        self.inputs[RADAR].tick(now - frame.t)
+        if not frame.tracks:  # an empty frame only moves the radar stream on
+            timeline.admit(RADAR, frame.t, None, clock)
+            timeline.release(clock)
+            return
+        self._seq += 1
+        timeline.admit(RADAR, frame.t, tracker_item(frame, self._seq), clock)
+
+    def _one_rf_fixes(self, msg: PointCloud2) -> None:
+        """Tracker profiles: one rf/fixes cloud (normally one attempt)."""
+        now, clock = self._now()
+        timeline = self.timeline
+        timeline.check_clock(clock)
+        self._last_input = time.monotonic()
+        self.received[RF] += 1
+        try:
+            attempts, bad = cv.msg_to_rf_attempts(msg, self.frame)
+        except cv.MessageError as exc:
+            self._tick_input(RF, msg, now)
+            self._drop(RF, exc)
+            return
+        self._count_points(RF, bad)
+        self.inputs[RF].tick(now - cv.time_from_stamp(msg.header.stamp))
+        for a in attempts:
+            self._seq += 1
+            timeline.admit(RF, a.t, tracker_item(a, self._seq) if a.ok else None, clock)
         timeline.release(clock)
 
     def _tick_input(self, source: str, msg: Any, now: float) -> None:
@@ -384,11 +504,20 @@ class FusionNode(Node):
         self._process(batches)
 
     def failed_attempt(self, source: str, t: float) -> None:
+        if source == RADAR:  # tracker profiles: a frame without reports
+            self.refused[f"{source}_empty_frame"] += 1
+            return
         self.refused[f"{source}_failed_attempt"] += 1
         self.statuses["rf_failed_attempt"] += 1
 
     def restart(self, reason: str) -> None:
-        self.estimator.restart_timeline(reason)
+        if self.estimator is not None:
+            self.estimator.restart_timeline(reason)
+            return
+        # tracker profiles: a new timeline starts from scratch (a bag loop)
+        self.tracker = Tracker(self.profile, self.site)
+        self.grid = StepGrid(self.profile, float(self.p["frequency"]))
+        self._processed_t = -math.inf
 
     def warn(self, text: str) -> None:
         self.get_logger().warning(text)
@@ -398,6 +527,10 @@ class FusionNode(Node):
 
     # --- processing -----------------------------------------------------------------------
     def _process(self, batches: Sequence[Batch[Measurement]]) -> None:
+        if self.tracker_mode:
+            self._process_tracker(batches)
+            return
+        assert self.estimator is not None
         for b in batches:
             try:
                 if b.source == RADAR:
@@ -413,6 +546,91 @@ class FusionNode(Node):
             by_seq = {m.seq: m for m in b.items}
             for step in steps:
                 self._publish_step(step, by_seq)
+
+    def _process_tracker(self, batches: Sequence[Batch[Measurement]]) -> None:
+        tracker, grid = self.tracker, self.grid
+        assert tracker is not None and grid is not None
+        for b in batches:
+            for m in b.items:
+                item = m.item if isinstance(m, TrackerItem) else None
+                if item is None:
+                    continue
+                for step in feed_tracker(tracker, item):
+                    self._publish_tracker_step(step)
+                    for gs in grid.feed_step(step):
+                        self._publish_grid(gs)
+                self._processed_t = max(self._processed_t, b.t)
+
+    def _publish_tracker_step(self, step: TrackerStep) -> None:
+        """Counters, views and the per-step topics (updated, coasted, accepted)."""
+        status = step.status
+        self.statuses[status] += 1
+        source = step.source
+        updated = step.updated
+        if updated:
+            self.used[source] += 1
+        else:
+            self.refused[f"{source}_{step.reason or status}"] += 1
+            if step.reason:
+                self.reasons[step.reason] += 1
+        nis = step.nis
+        if nis is not None and math.isfinite(nis):
+            self.nis[source].append(float(nis))
+        validated = step.validated
+        z = np.asarray(step.z, dtype=float)
+        if source == RADAR:
+            self.report_layer.radar(z, validated)
+        else:
+            self.report_layer.rf_fix(z, updated)
+        if not (updated or step.coasted):
+            return
+        self.steps_published += 1
+        v = step.values
+        self._path.append((step.t, v[0], v[1], v[2]))
+        self._last_step = step
+        self._views_dirty = True
+        side = self.pub_updated if updated else self.pub_coasted
+        if side.get_subscription_count():
+            side.publish(cv.odometry_from_values(step.t, v, self.frame, self.child_frame))
+        if validated:
+            self.accepted_published += 1
+            if source == RADAR:
+                if self.pub_acc_radar.get_subscription_count():
+                    r = self._radar_r.r_at(float(z[0]), float(z[1]), float(z[2]))
+                    R = np.array([[r[0], r[1], r[2]], [r[1], r[3], r[4]], [r[2], r[4], r[5]]])
+                    self.pub_acc_radar.publish(cv.radar_to_msg(step.t, z, R, self.frame))
+            elif self.pub_acc_rf.get_subscription_count():
+                en = (float(z[0]), float(z[1]))
+                self.pub_acc_rf.publish(cv.rf_to_msg(step.t, en, self.frame))
+
+    def _publish_grid(self, gs: GridState) -> None:
+        """One epoch of the fixed-rate output (nothing without a published track)."""
+        if not gs.published:
+            return
+        self.grid_published += 1
+        if self.pub_odom.get_subscription_count():
+            self.pub_odom.publish(
+                cv.state_to_odometry(gs.t, gs.x, gs.P, self.frame, self.child_frame)
+            )
+        if self.pub_fix.get_subscription_count():
+            v = (*gs.x.tolist(), *(gs.P[i, j] for i in range(6) for j in range(i, 6)))
+            self.pub_fix.publish(self._fix(gs.t, v))
+
+    def advance_output(self, t: float) -> int:
+        """Tracker profiles: publish the fixed-rate epochs up to ``t`` (inputs stalled);
+        returns the number published. Only forward from the last processed time, and at
+        most ``max_coast_s`` (60 s without a limit) beyond it."""
+        grid = self.grid
+        if grid is None or not math.isfinite(self._processed_t):
+            return 0
+        cap = self.profile.max_coast_s if self.profile.max_coast_s is not None else 60.0
+        target = min(t, self._processed_t + cap)
+        if target <= self._processed_t:
+            return 0
+        before = self.grid_published
+        for gs in grid.advance(target):
+            self._publish_grid(gs)
+        return self.grid_published - before
 
     def _publish_step(self, step: Any, by_seq: dict[int, Measurement]) -> None:
         status = step.status
@@ -516,6 +734,14 @@ class FusionNode(Node):
         if idle > 0 and pending and time.monotonic() - self._last_input >= idle:
             n = self.flush()
             self.get_logger().info(f"no input for {idle:g} s: flushed {n} measurement(s)")
+        stall = self._stall_s
+        if (
+            self.tracker_mode
+            and stall > 0
+            and not (self.timeline.pending or self.timeline.holding)
+            and time.monotonic() - self._last_input >= stall
+        ):
+            self.advance_output(self._now()[0])
         if time.monotonic() - self._last_view >= self._view_period:
             self.publish_views()
 
@@ -535,7 +761,9 @@ class FusionNode(Node):
             vals[f"rejected_{k}"] = v
         for k, v in sorted(self.dropped.items()):
             vals[f"dropped_{k}"] = v
-        counters = getattr(self.estimator, "counters", None)
+        if self.tracker is not None:
+            vals.update(self._tracker_diagnostics())
+        counters = getattr(self.estimator or self.tracker, "counters", None)
         if isinstance(counters, dict):
             for k, v in sorted(counters.items()):
                 vals[f"estimator_{k}"] = v
@@ -557,6 +785,27 @@ class FusionNode(Node):
         vals["clock_jumps_back"] = self.clock_jumps_back
         vals["timeline_resets"] = self.timeline_resets
         return {k: str(v) for k, v in vals.items()}
+
+    def _tracker_diagnostics(self) -> dict[str, Any]:
+        tr = self.tracker
+        assert tr is not None
+        out: dict[str, Any] = {"grid_published": self.grid_published}
+        out["received_radar_reports"] = self.received["radar_reports"]
+        best = tr.best_track()
+        ref = self._processed_t
+        if best is None:
+            out["track"] = "tentative" if tr.active else "none"
+            return out
+        out["track"] = "confirmed"
+        if best.last_update_t is not None and math.isfinite(ref):
+            out["since_last_accepted_s"] = f"{ref - best.last_update_t:.3f}"
+        obj = tr.objects.objects.get(best.radar_object) if best.radar_object is not None else None
+        if obj is not None:
+            score = obj.score(tr.cfg)
+            out["followed_radar_track"] = obj.id
+            out["uav_score"] = f"{score:.3f}"
+            out["uav_probability"] = f"{1.0 / (1.0 + math.exp(-max(-30.0, min(30.0, score)))):.3f}"
+        return out
 
     def publish_diagnostics(self) -> None:
         vals = self.diagnostics()

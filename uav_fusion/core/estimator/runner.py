@@ -17,7 +17,7 @@ from uav_fusion.core.estimator.selection import StreamInfo, StreamItem, build_st
 from uav_fusion.core.estimator.smoothing import Filtered, fixed_lag
 from uav_fusion.core.estimator.track import FusionEstimator, Step
 from uav_fusion.core.estimator.tracker import Tracker, TrackerStep
-from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RfAttempt
+from uav_fusion.core.records import RADAR, RF, Flight, Measurement, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
@@ -136,14 +136,37 @@ def tracker_stream(flight: Flight, profile: Profile) -> Iterator[RadarFrame | Rf
         yield flight.radar[i] if rank == 0 else flight.rf[i]
 
 
+@dataclass(eq=False, slots=True)
+class TrackerItem(Measurement):
+    """A radar frame or an RF attempt travelling through a live timeline
+    (:class:`~uav_fusion.core.timeline.Timeline`) as a :class:`Measurement`: ``t`` and
+    ``source`` order it, ``z`` (every report's position, or the fix's) recognises repeats,
+    ``item`` is what the :class:`Tracker` consumes."""
+
+    item: RadarFrame | RfAttempt | None = None
+
+
+def tracker_item(item: RadarFrame | RfAttempt, seq: int = 0) -> TrackerItem:
+    """Wrap a radar frame or an RF attempt for a live timeline."""
+    if isinstance(item, RadarFrame):
+        z = np.array([v for trk in item.tracks for v in (trk.e, trk.n, trk.u)], dtype=float)
+        return TrackerItem(t=item.t, source=RADAR, z=z, seq=seq, item=item)
+    return TrackerItem(t=item.t, source=RF, z=np.array((item.e, item.n)), seq=seq, item=item)
+
+
+def feed_tracker(tracker: Tracker, item: RadarFrame | RfAttempt) -> list[TrackerStep]:
+    """One radar frame or RF attempt through ``tracker`` (what :func:`run_tracker` does per
+    item)."""
+    if isinstance(item, RadarFrame):
+        return tracker.process_radar_frame(item)
+    return tracker.process_rf(item)
+
+
 def run_tracker(tracker: Tracker, stream: Iterable[RadarFrame | RfAttempt]) -> list[TrackerStep]:
     """Feed radar frames and RF attempts through a :class:`Tracker`."""
     steps: list[TrackerStep] = []
     for item in stream:
-        if isinstance(item, RadarFrame):
-            steps.extend(tracker.process_radar_frame(item))
-        else:
-            steps.extend(tracker.process_rf(item))
+        steps.extend(feed_tracker(tracker, item))
     return steps
 
 

@@ -1,0 +1,200 @@
+"""fusion_node with a tracker profile, in-process: every report of every frame (radar/tracks)
+and every attempt (rf/fixes) in, the offline tracker's steps out, the fixed-rate output equal
+to the core grid, malformed points dropped and counted, output predicted on when inputs stall."""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Odometry
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import PointCloud2
+
+from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.estimator import load_profile
+from uav_fusion.core.estimator.runner import run_tracker, tracker_stream
+from uav_fusion.core.estimator.tracker import Tracker
+from uav_fusion.core.grid import StepGrid
+from uav_fusion.core.records import RadarFrame, RadarTrack
+from uav_fusion.core.site import load_site
+from uav_fusion.nodes.fusion_node import FusionNode
+from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.qos import stream_qos
+
+FRAME = "enu_lw1"
+SPAN_S = 240.0  # the first four minutes of the bundled flight: take-off, first track, legs
+
+
+class Harness:
+    def __init__(self, ctx: Context, **params: Any) -> None:
+        params.setdefault("profile", "tracker")
+        self.fusion = FusionNode(
+            context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()]
+        )
+        self.io = Node("io", context=ctx)
+        qos = stream_qos(10000)
+        self.pub_radar = self.io.create_publisher(PointCloud2, "radar/tracks", qos)
+        self.pub_rf = self.io.create_publisher(PointCloud2, "rf/fixes", qos)
+        self.odom: list[Odometry] = []
+        self.updated: list[Odometry] = []
+        self.coasted: list[Odometry] = []
+        self.diag: list[DiagnosticArray] = []
+        sub = self.io.create_subscription
+        sub(Odometry, "fusion/odom", self.odom.append, qos)
+        sub(Odometry, "fusion/odom/updated", self.updated.append, qos)
+        sub(Odometry, "fusion/odom/coasted", self.coasted.append, qos)
+        sub(DiagnosticArray, "/diagnostics", self.diag.append, 10)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.fusion)
+        self.ex.add_node(self.io)
+        self.spin_until(
+            lambda: self.pub_radar.get_subscription_count() > 0
+            and self.pub_rf.get_subscription_count() > 0
+            and self.fusion.pub_odom.get_subscription_count() > 0
+        )
+
+    def spin_until(self, cond: Callable[[], bool], limit_s: float = 120.0) -> None:
+        end = time.monotonic() + limit_s
+        while not cond():
+            assert time.monotonic() < end, "condition not reached"
+            self.ex.spin_once(timeout_sec=0.02)
+
+    def feed(self, order: list[tuple[str, Any]]) -> None:
+        for i, (kind, msg) in enumerate(order):
+            (self.pub_radar if kind == "radar" else self.pub_rf).publish(msg)
+            if i % 5 == 4:
+                self.spin_until(lambda i=i: self.got() >= i + 1)
+
+    def got(self) -> int:
+        return int(self.fusion.received["radar"] + self.fusion.received["rf"])
+
+    def destroy(self) -> None:
+        self.fusion.destroy_node()
+        self.io.destroy_node()
+
+
+@pytest.fixture(scope="module")
+def flight_data() -> tuple[list[Any], list[Any], list[Any]]:
+    """(radar frames, RF attempts) of the first SPAN_S of the bundled flight, and the
+    offline tracker's stream over the same data."""
+    site = load_site()
+    flight = load_flight(data_path(DEFAULT_FLIGHT), site)
+    t_end = flight.truth[0].t + SPAN_S
+    frames = [fr for fr in flight.radar if fr.t < t_end]
+    attempts = [a for a in flight.rf if a.t < t_end]
+    stream = [x for x in tracker_stream(flight, load_profile("tracker")) if x.t < t_end]
+    return frames, attempts, stream
+
+
+def _order(frames: list[Any], attempts: list[Any], delay_s: float, seed: int) -> list[Any]:
+    """Both streams as messages, interleaved; RF up to ``delay_s`` late (its own order kept)."""
+    rng = random.Random(seed)
+    keyed = [(fr.t, 0, k, "radar", cv.radar_frame_to_cloud_msg(fr, FRAME))
+             for k, fr in enumerate(frames)]  # fmt: skip
+    last = -1.0
+    for k, a in enumerate(attempts):
+        last = max(last, a.t + rng.uniform(0.0, delay_s))
+        keyed.append((last, 1, k, "rf", cv.rf_attempts_to_cloud_msg([a], FRAME)))
+    keyed.sort(key=lambda e: (e[0], e[1], e[2]))
+    return [(kind, msg) for _, _, _, kind, msg in keyed]
+
+
+@pytest.mark.parametrize(("delay_s", "seed"), [(0.0, 0), (1.5, 1)])
+def test_live_tracker_equals_the_offline_run_and_its_grid(
+    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]], delay_s: float, seed: int
+) -> None:
+    frames, attempts, stream = flight_data
+    site = load_site()
+    profile = load_profile("tracker")
+    steps = run_tracker(Tracker(profile, site), stream)
+    est = [s for s in steps if s.updated or s.coasted]
+    grid = StepGrid(profile, 10.0)
+    expected_grid = [g for s in steps for g in grid.feed_step(s) if g.published]
+    assert len(est) > 300 and len(expected_grid) > 1000
+
+    h = Harness(ctx, reorder_window_s=2.0, idle_flush_s=0.0, stall_timeout_s=0.0)
+    h.feed(_order(frames, attempts, delay_s, seed))
+    h.spin_until(lambda: h.got() == len(frames) + len(attempts))
+    h.fusion.flush()
+    n_upd = sum(1 for s in est if s.updated)
+    h.spin_until(lambda: len(h.updated) == n_upd and len(h.coasted) == len(est) - n_upd)
+    got = sorted(
+        [cv.odometry_to_state(o) for o in h.updated + h.coasted], key=lambda g: g.t
+    )
+    assert [g.t for g in got] == [s.t for s in est]
+    assert np.max(np.abs(np.array([g.x for g in got]) - np.array([s.x for s in est]))) < 1e-9
+    # the fixed-rate output is the core grid of the same steps, epoch for epoch
+    h.spin_until(lambda: len(h.odom) == len(expected_grid))
+    odom = [cv.odometry_to_state(o) for o in h.odom]
+    assert [o.t for o in odom] == [g.t for g in expected_grid]
+    dx = np.array([o.x for o in odom]) - np.array([g.x for g in expected_grid])
+    assert np.max(np.abs(dx)) < 1e-9
+    dp = np.array([o.P[:3, :3] for o in odom]) - np.array([g.P[:3, :3] for g in expected_grid])
+    assert np.max(np.abs(dp)) < 1e-6
+    assert not h.fusion.dropped
+    h.destroy()
+
+
+def test_malformed_points_are_dropped_and_counted_the_rest_fused(
+    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+) -> None:
+    frames, _attempts, _ = flight_data
+    h = Harness(ctx, idle_flush_s=0.0, stall_timeout_s=0.0)
+    good = next(fr for fr in frames if len(fr.tracks) >= 1)
+    bad = RadarTrack(good.t, 999, 0.0, 0.0, 0.0, float("nan"), 1.0, 2.0, None, 0.9, None, None)
+    far = RadarTrack(good.t, 998, 0.0, 0.0, 0.0, 3.0e7, 1.0, 2.0, None, 0.9, None, None)
+    msg = cv.radar_frame_to_cloud_msg(RadarFrame(good.t, (*good.tracks, bad, far)), FRAME)
+    h.pub_radar.publish(msg)
+    h.spin_until(lambda: h.fusion.received["radar"] == 1)
+    h.fusion.flush()
+    assert h.fusion.dropped["radar_point_nan"] == 1
+    assert h.fusion.dropped["radar_point_out_of_range"] == 1
+    assert h.fusion.received["radar_reports"] == len(good.tracks) + 2
+    n = sum(h.fusion.statuses.values())
+    assert n == len(good.tracks)  # one step per good report, none for the bad points
+    broken = cv.radar_frame_to_cloud_msg(good, FRAME)
+    broken.data = bytes(broken.data)[:-3]
+    h.pub_radar.publish(broken)
+    h.spin_until(lambda: h.fusion.received["radar"] == 2)
+    assert h.fusion.dropped["radar_bad_layout"] == 1
+    h.destroy()
+
+
+def test_output_is_predicted_on_when_the_inputs_stall(
+    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+) -> None:
+    frames, attempts, _ = flight_data
+    h = Harness(ctx, idle_flush_s=0.2, stall_timeout_s=0.3)
+    h.feed(_order(frames, attempts, 0.0, 0))
+    h.spin_until(lambda: h.got() == len(frames) + len(attempts))
+    fusion = h.fusion
+    h.spin_until(lambda: not fusion.timeline.pending)
+    last_t = fusion._processed_t
+    tracker = fusion.tracker
+    assert tracker is not None and tracker.best_track() is not None
+    # with the inputs silent the epochs beyond the last measurement are published, up to the
+    # track's maximum coast (the wall clock is far ahead of these 2025 stamps)
+    max_coast = load_profile("tracker").max_coast_s
+    assert max_coast is not None
+    best = tracker.best_track()
+    assert best is not None and best.last_update_t is not None
+    h.spin_until(lambda: bool(h.odom) and cv.time_from_stamp(h.odom[-1].header.stamp) > last_t)
+    h.spin_until(lambda: any(d.status and "grid_published" in {v.key for v in d.status[0].values}
+                             for d in h.diag))  # fmt: skip
+    ts = [cv.time_from_stamp(o.header.stamp) for o in h.odom]
+    assert ts == sorted(ts)
+    assert ts[-1] <= best.last_update_t + max_coast + 1e-6
+    vals = {v.key: v.value for v in h.diag[-1].status[0].values}
+    assert vals["track"] == "confirmed" and float(vals["uav_probability"]) > 0.0
+    assert float(vals["since_last_accepted_s"]) >= 0.0
+    h.destroy()
