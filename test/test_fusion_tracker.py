@@ -159,7 +159,7 @@ def test_malformed_points_are_dropped_and_counted_the_rest_fused(
     h.fusion.flush()
     assert h.fusion.dropped["radar_point_nan"] == 1
     assert h.fusion.dropped["radar_point_out_of_range"] == 1
-    assert h.fusion.received["radar_reports"] == len(good.tracks) + 2
+    assert h.fusion.received_reports == len(good.tracks) + 2
     n = sum(h.fusion.statuses.values())
     assert n == len(good.tracks)  # one step per good report, none for the bad points
     broken = cv.radar_frame_to_cloud_msg(good, FRAME)

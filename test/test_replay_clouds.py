@@ -3,6 +3,7 @@ rf/fixes) next to the paper profile's topics, losslessly."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -64,4 +65,23 @@ def test_the_clouds_can_be_switched_off(ctx: Context, flight_dir: Path) -> None:
     assert radar.pub_tracks is None and rf.pub_fixes is None
     assert len(radar.streams()) == 2 and len(rf.streams()) == 1
     for n in (radar, rf):
+        n.destroy_node()
+
+
+def test_a_reader_of_either_encoding_starts_the_replay(ctx: Context, flight_dir: Path) -> None:
+    """radar/pose and radar/tracks carry one stream: a graph reads one of them, so the replay
+    does not wait for a reader of the other (nor rf/fix for one of rf/fixes)."""
+    flight = load_flight(flight_dir)
+    radar = RadarReplay(context=ctx, parameter_overrides=_params(
+        flight_dir=str(flight_dir), rate=0.0, wait_for_subscribers_s=60.0, publish_raw=False))
+    col = Collector(ctx, {"radar/tracks": PointCloud2})
+    ex = SingleThreadedExecutor(context=ctx)
+    for n in (radar, col):
+        ex.add_node(n)
+    radar.start_standalone()
+    t0 = time.monotonic()
+    spin_until(ex, lambda: len(col.got["radar/tracks"]) == len(flight.radar))
+    assert time.monotonic() - t0 < 30.0  # well before the 60 s wait would have ended
+    assert radar.pub.get_subscription_count() == 0
+    for n in (radar, col):
         n.destroy_node()

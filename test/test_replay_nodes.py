@@ -137,7 +137,8 @@ def test_min_subscribers_holds_the_first_message_until_every_reader_is_there(
     readers receive every message (volatile QoS gives a late reader nothing old)."""
     flight = load_flight(flight_dir)
     rf = RfReplay(context=ctx, parameter_overrides=_params(
-        flight_dir=str(flight_dir), rate=0.0, min_subscribers=2, wait_for_subscribers_s=60.0))
+        flight_dir=str(flight_dir), rate=0.0, min_subscribers=2, wait_for_subscribers_s=60.0,
+        publish_fixes=False))
     first = Collector(ctx, {"rf/fix": PointStamped})
     ex = SingleThreadedExecutor(context=ctx)
     for n in (rf, first):
@@ -162,7 +163,9 @@ def test_delay_parameter_publishes_late_but_keeps_stamps(ctx: Context, flight_di
     flight = load_flight(flight_dir)
     rf = RfReplay(
         context=ctx,
-        parameter_overrides=_params(flight_dir=str(flight_dir), rate=0.0, delay_s=1.5),
+        parameter_overrides=_params(
+            flight_dir=str(flight_dir), rate=0.0, delay_s=1.5, publish_fixes=False
+        ),
     )
     col = Collector(ctx, {"rf/fix": PointStamped})
     ex = SingleThreadedExecutor(context=ctx)

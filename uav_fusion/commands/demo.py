@@ -4,7 +4,9 @@ Runs truth_replay, rf_replay, radar_replay, fusion_node and evaluator_node in th
 (DDS between them, one shared replay timeline, see ``docs/graph.md``), waits for the end of
 the flight, has the evaluator write its report (Table II, metrics, figures) under
 ``out/demo/`` and prints the table. It then runs the same flight through the core offline
-and says whether the live table equals the offline one.
+and says whether the live table equals the offline one. With ``--compare`` (default
+``tracker``) the graph runs a second time with that profile (report under
+``out/demo/<profile>/``), and the two tables are printed side by side.
 
 DDS discovery is kept on this machine: unless set already, ``ROS_AUTOMATIC_DISCOVERY_RANGE``
 is set to LOCALHOST and ``ROS_DOMAIN_ID`` to a random domain for this run.
@@ -40,6 +42,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "1 = real time, 20 = twenty times real time",
     )
     parser.add_argument("--profile", default="paper", help="estimator profile (default: paper)")
+    parser.add_argument(
+        "--compare",
+        default="tracker",
+        metavar="PROFILE",
+        help="then run the graph again with this profile and print both tables side by side "
+        "(default: tracker; 'none' to skip)",
+    )
     parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
     parser.add_argument(
         "--window",
@@ -111,24 +120,55 @@ def run(args: argparse.Namespace) -> int:
     if args.bag:
         return _run_bag(args, flight_dir, out)
 
+    from uav_fusion.core.evaluation import format_table
+
+    profiles = [args.profile]
+    if args.compare and args.compare.lower() != "none" and args.compare != args.profile:
+        profiles.append(args.compare)
+    lives: dict[str, Any] = {}
+    code = 0
+    for k, profile in enumerate(profiles):
+        folder = out if k == 0 else out / Path(profile).stem
+        live = _run_graph(args, flight_dir, folder, profile)
+        if live is None:
+            return 1
+        lives[profile] = live
+        if len(profiles) == 1:
+            print()
+            print(format_table(live))
+            print()
+    if len(profiles) > 1:
+        print()
+        print(format_side_by_side(lives))
+        print()
+    if not args.no_check:
+        for profile, live in lives.items():
+            code = max(code, _compare_offline(args, flight_dir, live, profile))
+    return code
+
+
+def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: str) -> Any:
+    """One run of the live graph with ``profile``; its Evaluation, or None on failure."""
     import rclpy
     from rclpy.context import Context
     from rclpy.impl.logging_severity import LoggingSeverity
     from rclpy.logging import set_logger_level
 
-    from uav_fusion.core.evaluation import format_table
     from uav_fusion.nodes.graph import Graph
 
+    ov = _overrides(args, flight_dir, out)
+    ov["fusion_node"]["profile"] = profile
+    ov["radar_replay"]["profile"] = profile
     ctx = Context()
     rclpy.init(context=ctx, args=[])
     graph: Graph | None = None
     try:
-        graph = Graph(ctx, _overrides(args, flight_dir, out))
+        graph = Graph(ctx, ov)
         if args.quiet:
             for n in graph.nodes:
                 set_logger_level(n.get_logger().name, LoggingSeverity.WARN)
         print(
-            f"demo: replaying {flight_dir} at "
+            f"demo: profile {profile}: replaying {flight_dir} at "
             + ("full speed (rate 0)" if args.rate == 0 else f"{args.rate:g}x real time")
             + f", ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}",
             flush=True,
@@ -136,28 +176,52 @@ def run(args: argparse.Namespace) -> int:
         res = graph.run(timeout_s=args.timeout)
         if not res.ok:
             print(f"demo: {res.message}", file=sys.stderr)
-            return 1
+            return None
         live = graph.evaluator.evaluate()
         dropped = dict(graph.fusion.dropped)
+        grid = graph.fusion.grid_published
         flight_s = graph.driver.t_end - graph.driver.t_start
     finally:
         if graph is not None:
             graph.destroy()
         rclpy.shutdown(context=ctx)
-
-    print()
-    print(format_table(live))
-    print()
+    extra = f", {grid} fixed-rate epochs on fusion/odom" if grid else ""
     print(
-        f"demo: {sum(res.published.values())} messages ({res.published}) over "
-        f"{flight_s:.0f} s of flight in {res.wall_s:.1f} s wall "
-        f"({flight_s / res.wall_s:.0f}x real time); {res.steps} filter steps; "
+        f"demo: profile {profile}: {sum(res.published.values())} messages ({res.published}) "
+        f"over {flight_s:.0f} s of flight in {res.wall_s:.1f} s wall "
+        f"({flight_s / res.wall_s:.0f}x real time); {res.steps} filter steps{extra}; "
         f"fusion drops: {dropped or 'none'}"
     )
     print(f"demo: report written to {res.report}")
-    if not args.no_check:
-        return _compare_offline(args, flight_dir, live)
-    return 0
+    return live
+
+
+def format_side_by_side(lives: dict[str, Any], digits: int = 1) -> str:
+    """Table II's rows for several profiles side by side: count, mean and count coverage."""
+    names = list(lives)
+    first = lives[names[0]]
+    w = 44
+    head = f"{'stage':<{w}}" + "".join(
+        f" | {n[:24]:>24}" for n in names
+    )
+    sub = f"{'':<{w}}" + "".join(f" | {'count':>6} {'mean m':>8} {'cov %':>8}" for _ in names)
+    lines = [head, sub, "-" * len(sub)]
+    for i, row in enumerate(first.rows):
+        label = row.spec.label
+        label = label if len(label) <= w else label[: w - 1] + "…"
+        cells = []
+        for n in names:
+            r = lives[n].rows[i]
+            st = r.stats
+            mean = "-" if not st.count else f"{st.mean:.{digits}f}"
+            cov = "-" if st.coverage_pct != st.coverage_pct else f"{st.coverage_pct:.1f}"
+            cells.append(f" | {st.count:>6d} {mean:>8} {cov:>8}")
+        lines.append(f"{label:<{w}}" + "".join(cells))
+    lines.append(
+        "count coverage over the RF attempts, raw radar reports and filter steps of each run "
+        "(the full tables: report.md of each run)"
+    )
+    return "\n".join(lines)
 
 
 # What ``demo --bag --record`` records: the fusion node's outputs and views, and the inputs
@@ -308,8 +372,11 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
     return 0
 
 
-def _compare_offline(args: argparse.Namespace, flight_dir: Path, live: Any) -> int:
+def _compare_offline(
+    args: argparse.Namespace, flight_dir: Path, live: Any, profile: str | None = None
+) -> int:
     """Score the same flight offline and report whether the live table is the same."""
+    profile = profile or args.profile
     from uav_fusion.commands.evaluate import evaluate_flight
     from uav_fusion.core.dataset import load_flight
     from uav_fusion.core.site import load_site
@@ -317,7 +384,7 @@ def _compare_offline(args: argparse.Namespace, flight_dir: Path, live: Any) -> i
     t0 = time.perf_counter()
     site = load_site(args.site)
     flight = load_flight(flight_dir, site)
-    ref, _ = evaluate_flight(flight, args.profile, site)
+    ref, _ = evaluate_flight(flight, profile, site)
     same = True
     worst = 0.0
     for a, b in zip(live.rows, ref.rows, strict=True):
@@ -331,12 +398,13 @@ def _compare_offline(args: argparse.Namespace, flight_dir: Path, live: Any) -> i
             worst = max(worst, abs(a.stats.mean - b.stats.mean), abs(a.stats.max - b.stats.max))
     if same and worst <= 1e-9:
         print(
-            f"demo: the live graph's table equals the offline run's "
+            f"demo: profile {profile}: the live graph's table equals the offline run's "
             f"(largest difference {worst:.1e} m; offline check {time.perf_counter() - t0:.1f} s)"
         )
         return 0
     print(
-        f"demo: live and offline differ (largest difference in mean/max {worst:.3g} m)",
+        f"demo: profile {profile}: live and offline differ (largest difference in mean/max "
+        f"{worst:.3g} m)",
         file=sys.stderr,
     )
     return 1

@@ -220,6 +220,8 @@ class FusionNode(Node):
             range_gate = self.estimator.range_gate_m
         #: grid epochs published on fusion/odom (tracker profiles)
         self.grid_published = 0
+        #: radar reports received on radar/tracks, malformed points included (tracker profiles)
+        self.received_reports = 0
         self._processed_t = -math.inf
         self._stall_s = float(self.p["stall_timeout_s"])
         self.received: Counter[str] = Counter()
@@ -456,7 +458,7 @@ class FusionNode(Node):
             self._drop(RADAR, exc)
             return
         self._count_points(RADAR, bad)
-        self.received["radar_reports"] += len(frame.tracks) + sum(bad.values())
+        self.received_reports += len(frame.tracks) + sum(bad.values())
         self.inputs[RADAR].tick(now - frame.t)
         if not frame.tracks:  # an empty frame only moves the radar stream on
             timeline.admit(RADAR, frame.t, None, clock)
@@ -790,7 +792,7 @@ class FusionNode(Node):
         tr = self.tracker
         assert tr is not None
         out: dict[str, Any] = {"grid_published": self.grid_published}
-        out["received_radar_reports"] = self.received["radar_reports"]
+        out["received_radar_reports"] = self.received_reports
         best = tr.best_track()
         ref = self._processed_t
         if best is None:

@@ -99,6 +99,23 @@ class Graph:
         except BaseException:
             self.destroy()
             raise
+        # the fusion node's inputs: radar/pose + rf/fix (paper) or the clouds (tracker
+        # profiles); streams nobody in the graph reads are not replayed
+        if self.fusion.tracker_mode:
+            self.radar.pose_stream = False
+            if self.radar.pub_tracks is None or self.rf.pub_fixes is None:
+                self.destroy()
+                raise UsageError(
+                    "fusion_node runs a tracker profile: radar_replay publish_tracks and "
+                    "rf_replay publish_fixes must be true"
+                )
+            self.fusion_radar_pub: Any = self.radar.pub_tracks
+            self.fusion_rf_pub: Any = self.rf.pub_fixes
+        else:
+            self.radar.pub_tracks = None
+            self.rf.pub_fixes = None
+            self.fusion_radar_pub = self.radar.pub
+            self.fusion_rf_pub = self.rf.pub
         self.replays = [self.truth, self.rf, self.radar]
         tp = self.truth.p
         self.rate = float(tp["rate"])
@@ -150,7 +167,9 @@ class Graph:
         return sum(self.driver.published_to(p) for p in self._streams.get(node, []))
 
     def fusion_inputs_published(self) -> int:
-        return self.driver.published_to(self.radar.pub) + self.driver.published_to(self.rf.pub)
+        return self.driver.published_to(self.fusion_radar_pub) + self.driver.published_to(
+            self.fusion_rf_pub
+        )
 
     def fusion_caught_up(self) -> bool:
         return self._fusion_count() + self._lost_offset[0] >= self.fusion_inputs_published()
@@ -259,8 +278,9 @@ class Graph:
         """Published minus received, per subscriber and stream (nonzero entries only)."""
         f = self.fusion
         pairs = [
-            ("fusion_node: radar", self.driver.published_to(self.radar.pub), f.received[RADAR]),
-            ("fusion_node: rf", self.driver.published_to(self.rf.pub), f.received[RF]),
+            ("fusion_node: radar", self.driver.published_to(self.fusion_radar_pub),
+             f.received[RADAR]),
+            ("fusion_node: rf", self.driver.published_to(self.fusion_rf_pub), f.received[RF]),
         ]
         ev = self.evaluator
         if ev is not None:

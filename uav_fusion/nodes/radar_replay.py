@@ -74,11 +74,17 @@ class RadarReplay(ReplayNode):
             if self.p["publish_raw"]
             else None
         )
+        #: radar/pose is replayed (a graph whose fusion node runs a tracker profile drops it)
+        self.pose_stream = True
         self.pub_tracks = (
             self.create_publisher(PointCloud2, self.p["radar_tracks_topic"], self.qos)
             if self.p["publish_tracks"]
             else None
         )
+
+    def alternatives(self) -> list[tuple[Publisher, ...]]:
+        # the fusion node reads radar/pose (paper) or radar/tracks (tracker profiles)
+        return [(self.pub, self.pub_tracks)] if self.pub_tracks is not None else []
 
     def streams(self) -> list[tuple[Publisher, list[tuple[float, Any]]]]:
         R = self.profile.r_radar
@@ -87,7 +93,9 @@ class RadarReplay(ReplayNode):
             for frame in selected_radar(self.flight, self.profile, self.site)
             for m in frame
         ]
-        out: list[tuple[Publisher, list[tuple[float, Any]]]] = [(self.pub, sel)]
+        out: list[tuple[Publisher, list[tuple[float, Any]]]] = []
+        if self.pose_stream:
+            out.append((self.pub, sel))
         if self.pub_raw is not None:
             raw = [
                 (trk.t, cv.radar_track_to_msg(trk, R, self.frame_id))

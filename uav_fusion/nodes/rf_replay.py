@@ -46,6 +46,10 @@ class RfReplay(ReplayNode):
             else None
         )
 
+    def alternatives(self) -> list[tuple[Publisher, ...]]:
+        # the fusion node reads rf/fix (paper) or rf/fixes (tracker profiles)
+        return [(self.pub, self.pub_fixes)] if self.pub_fixes is not None else []
+
     def streams(self) -> list[tuple[Publisher, list[tuple[float, Any]]]]:
         fid = self.frame_id
         out: list[tuple[Publisher, list[tuple[float, Any]]]] = [

@@ -181,6 +181,8 @@ class ReplayDriver:
         self.on_done = on_done
         self.events: list[ReplayEvent] = []
         self._publishers: list[Publisher] = []
+        # id(publisher) -> the publishers of the same data in another encoding
+        self._alternatives: dict[int, list[Publisher]] = {}
         self.published: dict[int, int] = {}  # id(publisher) -> messages published
         self._next = 0
         self._order = 0
@@ -213,6 +215,13 @@ class ReplayDriver:
             self.events.append(ReplayEvent(t + delay_s, self._order, publisher, msg))
             self._order += 1
 
+    def alternatives(self, *publishers: Publisher) -> None:
+        """Declare ``publishers`` as one stream in several encodings (``radar/pose`` and
+        ``radar/tracks``): the wait for subscribers is satisfied for all of them as soon as
+        one has its subscribers (a graph reads one encoding, not every one)."""
+        for p in publishers:
+            self._alternatives[id(p)] = [q for q in publishers if q is not p]
+
     def start(self) -> None:
         """Sort the timeline and begin (waiting for subscribers first)."""
         self.events.sort()
@@ -237,8 +246,17 @@ class ReplayDriver:
             and self.clock_pub.get_subscription_count() < self.clock_subscribers
         ):
             return False
+        return not self._missing_subscribers()
+
+    def _missing_subscribers(self) -> list[Publisher]:
         n = max(1, self.min_subscribers)
-        return all(p.get_subscription_count() >= n for p in self._publishers)
+        ready = {id(p) for p in self._publishers if p.get_subscription_count() >= n}
+        return [
+            p
+            for p in self._publishers
+            if id(p) not in ready
+            and not any(id(q) in ready for q in self._alternatives.get(id(p), []))
+        ]
 
     def _publish_clock(self, t: float) -> None:
         if self.clock_pub is None or t <= self._clock_t:
@@ -271,9 +289,7 @@ class ReplayDriver:
                 return
             if not ready:
                 n = max(1, self.min_subscribers)
-                missing = [
-                    p.topic_name for p in self._publishers if p.get_subscription_count() < n
-                ]
+                missing = [p.topic_name for p in self._missing_subscribers()]
                 what = "no subscriber" if n == 1 else f"fewer than {n} subscribers"
                 self.node.get_logger().warning(
                     f"{what} after {self.wait_s:g} s on {', '.join(missing)}; "
@@ -376,6 +392,11 @@ class ReplayNode(Node):
         """(publisher, [(sensor time, message), ...]) of every stream this node replays."""
         raise NotImplementedError
 
+    def alternatives(self) -> list[tuple[Publisher, ...]]:
+        """Groups of publishers that carry one stream in several encodings (see
+        :meth:`ReplayDriver.alternatives`)."""
+        return []
+
     def use_sim_time(self) -> bool:
         return bool(self.get_parameter("use_sim_time").value)
 
@@ -397,6 +418,8 @@ class ReplayNode(Node):
         )
         for pub, items in self.streams():
             drv.add(pub, items, float(self.p["delay_s"]))
+        for group in self.alternatives():
+            drv.alternatives(*group)
         drv.start()
         self.driver = drv
         return drv
