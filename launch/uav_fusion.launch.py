@@ -52,7 +52,9 @@ def generate_launch_description() -> LaunchDescription:
                 " time; for a fast lossless run use 'ros2 run uav_fusion uav_fusion demo')"
             ),
         ),
-        DeclareLaunchArgument("profile", default_value="paper", description="estimator profile"),
+        DeclareLaunchArgument(
+            "profile", default_value="tracker", description="estimator profile (tracker, paper)"
+        ),
         DeclareLaunchArgument(
             "output_dir", default_value="out/report", description="evaluator report folder"
         ),
