@@ -21,7 +21,7 @@ from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator import load_profile
-from uav_fusion.core.estimator.runner import run_tracker, tracker_stream
+from uav_fusion.core.estimator.runner import run_tracker, smooth_steps, tracker_stream
 from uav_fusion.core.estimator.tracker import Tracker
 from uav_fusion.core.grid import StepGrid
 from uav_fusion.core.records import RadarFrame, RadarTrack
@@ -197,4 +197,32 @@ def test_output_is_predicted_on_when_the_inputs_stall(
     vals = {v.key: v.value for v in h.diag[-1].status[0].values}
     assert vals["track"] == "confirmed" and float(vals["uav_probability"]) > 0.0
     assert float(vals["since_last_accepted_s"]) >= 0.0
+    h.destroy()
+
+
+def test_live_fixed_lag_smoothing_equals_the_offline_one(
+    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+) -> None:
+    frames, attempts, stream = flight_data
+    site = load_site()
+    profile = load_profile("tracker_smoothed")
+    assert profile.smoother_lag_s == 3.0
+    steps = run_tracker(Tracker(profile, site), stream)
+    smoothed = [s for s in smooth_steps(steps, 3.0) if s.counted]
+    assert len(smoothed) > 300
+    h = Harness(ctx, profile="tracker_smoothed", idle_flush_s=0.0, stall_timeout_s=0.0)
+    got: list[Odometry] = []
+    h.io.create_subscription(Odometry, "fusion/odom/smoothed", got.append, stream_qos(10000))
+    h.spin_until(lambda: h.fusion.pub_smoothed.get_subscription_count() > 0)
+    h.feed(_order(frames, attempts, 1.0, 3))
+    h.spin_until(lambda: h.got() == len(frames) + len(attempts))
+    h.fusion.flush()  # the end of the stream ends the last smoothing window
+    h.spin_until(lambda: len(got) == len(smoothed))
+    live = [cv.odometry_to_state(o) for o in got]
+    assert [g.t for g in live] == [s.t for s in smoothed]
+    dx = np.array([g.x for g in live]) - np.array([s.x for s in smoothed])
+    assert np.max(np.abs(dx)) < 1e-9
+    # and it is not the filtered track: smoothing moved the estimates
+    filt = [s for s in steps if s.counted]
+    assert np.max(np.abs(np.array([s.x for s in filt]) - np.array([s.x for s in smoothed]))) > 1.0
     h.destroy()

@@ -75,3 +75,29 @@ def test_fixed_lag_equals_rts_restricted_to_the_lag_window(lag: float) -> None:
     big = fixed_lag(entries, 1e9)  # a lag longer than the flight: offline RTS
     for (x, _), (rx, _) in zip(big, rts(entries), strict=True):
         np.testing.assert_array_equal(x, rx)
+
+
+@pytest.mark.parametrize("lag_s", [0.0, 1.0, 3.0, 10.0])
+def test_streaming_fixed_lag_equals_the_batch_one(lag_s: float) -> None:
+    from uav_fusion.core.estimator.smoothing import Filtered, FixedLagSmoother, fixed_lag
+
+    rng = np.random.default_rng(4)
+    t = np.cumsum(rng.choice([0.0, 0.25, 0.5, 4.0], size=120))  # repeats, gaps
+    entries = []
+    for k, tk in enumerate(t):
+        A = rng.normal(size=(6, 6))
+        P = A @ A.T + 6.0 * np.eye(6)
+        entries.append(Filtered(float(tk), rng.normal(size=6) * (k + 1), P, (2.0, 2.0, 0.5)))
+    batch = fixed_lag(entries, lag_s)
+    sm = FixedLagSmoother(lag_s)
+    got = []
+    for e in entries:
+        out = sm.push(e)
+        assert all(o[0].t + lag_s < e.t for o in out)  # released only once final
+        got.extend(out)
+    got.extend(sm.finish())
+    assert [g[0] for g in got] == entries
+    for (_, xs, Ps), (bx, bP) in zip(got, batch, strict=True):
+        assert np.array_equal(xs, bx) and np.array_equal(Ps, bP)
+    with pytest.raises(ValueError):
+        FixedLagSmoother(float("inf"))

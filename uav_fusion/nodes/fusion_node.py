@@ -75,6 +75,7 @@ from visualization_msgs.msg import MarkerArray
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.estimator import FusionEstimator, Profile, load_profile
 from uav_fusion.core.estimator.runner import TrackerItem, feed_tracker, tracker_item
+from uav_fusion.core.estimator.smoothing import Filtered, FixedLagSmoother
 from uav_fusion.core.estimator.tracker import Tracker, TrackerStep, radar_model_from_profile
 from uav_fusion.core.grid import GridState, StepGrid
 from uav_fusion.core.records import RADAR, RF, Measurement
@@ -130,6 +131,8 @@ def fusion_params() -> list[Param]:
         topic("path_topic", "fusion/path", "the fused track (nav_msgs/Path)"),
         topic("markers_topic", "fusion/markers", "views (visualization_msgs/MarkerArray)"),
         topic("fix_topic", "fusion/fix", "fused position as sensor_msgs/NavSatFix"),
+        topic("smoothed_topic", "fusion/odom/smoothed",
+              "profiles with smoother.lag_s: every step, fixed-lag smoothed (Odometry)"),
         topic("flush_service", "fusion/flush", "std_srvs/Trigger: flush the reorder buffer"),
         Param(
             "reorder_window_s", 2.0,
@@ -222,6 +225,14 @@ class FusionNode(Node):
         self.grid_published = 0
         #: radar reports received on radar/tracks, malformed points included (tracker profiles)
         self.received_reports = 0
+        # live fixed-lag smoothing (profiles with a finite smoother.lag_s)
+        lag = self.profile.smoother_lag_s
+        finite = lag is not None and math.isfinite(lag)
+        self._smooth_lag = lag if self.tracker_mode and finite else None
+        self._smoother: FixedLagSmoother | None = None
+        self._smooth_segment = -1
+        #: smoothed steps published on fusion/odom/smoothed
+        self.smoothed_published = 0
         self._processed_t = -math.inf
         self._stall_s = float(self.p["stall_timeout_s"])
         self.received: Counter[str] = Counter()
@@ -269,6 +280,7 @@ class FusionNode(Node):
         self.pub_acc_radar = pub(PoseWithCovarianceStamped, self.p["accepted_radar_topic"])
         self.pub_acc_rf = pub(PointStamped, self.p["accepted_rf_topic"])
         self.pub_fix = pub(NavSatFix, self.p["fix_topic"])
+        self.pub_smoothed = pub(Odometry, self.p["smoothed_topic"])
         self.pub_path = pub(NavPath, self.p["path_topic"], DIAGNOSTICS_QOS)
         self.pub_markers = pub(MarkerArray, self.p["markers_topic"], DIAGNOSTICS_QOS)
         self.pub_diag = pub(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
@@ -584,6 +596,8 @@ class FusionNode(Node):
             self.report_layer.radar(z, validated)
         else:
             self.report_layer.rf_fix(z, updated)
+        if self._smooth_lag is not None and step.counted:
+            self._smooth(step)
         if not (updated or step.coasted):
             return
         self.steps_published += 1
@@ -604,6 +618,29 @@ class FusionNode(Node):
             elif self.pub_acc_rf.get_subscription_count():
                 en = (float(z[0]), float(z[1]))
                 self.pub_acc_rf.publish(cv.rf_to_msg(step.t, en, self.frame))
+
+    def _smooth(self, step: TrackerStep) -> None:
+        """Feed one estimate of a confirmed track to the fixed-lag smoother (a new one per
+        track segment) and publish what became final."""
+        assert self._smooth_lag is not None
+        if self._smoother is None or step.segment != self._smooth_segment:
+            self.finish_smoothing()
+            self._smoother = FixedLagSmoother(self._smooth_lag)
+            self._smooth_segment = step.segment
+        entry = Filtered(step.t, step.x, step.P, step.q_eff)
+        for e, xs, Ps in self._smoother.push(entry):
+            self._publish_smoothed(e.t, xs, Ps)
+
+    def finish_smoothing(self) -> None:
+        """End the current segment's smoothing window: publish its remaining estimates."""
+        if self._smoother is not None:
+            for e, xs, Ps in self._smoother.finish():
+                self._publish_smoothed(e.t, xs, Ps)
+
+    def _publish_smoothed(self, t: float, x: Any, P: Any) -> None:
+        self.smoothed_published += 1
+        if self.pub_smoothed.get_subscription_count():
+            self.pub_smoothed.publish(cv.state_to_odometry(t, x, P, self.frame, self.child_frame))
 
     def _publish_grid(self, gs: GridState) -> None:
         """One epoch of the fixed-rate output (nothing without a published track)."""
@@ -718,6 +755,9 @@ class FusionNode(Node):
         Stamps held back as too far ahead (unconfirmed) are dropped as ``future``.
         """
         n = self.timeline.flush()
+        if self._smooth_lag is not None:
+            self.finish_smoothing()
+            self._smoother = None
         self.publish_views()
         return n
 

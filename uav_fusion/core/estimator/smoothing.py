@@ -81,3 +81,55 @@ def fixed_lag(entries: Sequence[Filtered], lag_s: float) -> list[tuple[FloatArra
             xs, Ps = _backward(entries, xs, Ps, i)
         out.append((xs, Ps))
     return out
+
+
+class FixedLagSmoother:
+    """:func:`fixed_lag` as a stream, for a live node: push the filtered entries of one track
+    segment as they come; an entry is returned smoothed as soon as an entry later than
+    ``t_k + lag_s`` arrives (or at :meth:`finish`, the end of the segment), computed exactly
+    as :func:`fixed_lag` computes it over the whole segment."""
+
+    def __init__(self, lag_s: float) -> None:
+        if not lag_s >= 0.0 or lag_s == float("inf"):
+            raise ValueError(f"a streaming fixed lag must be finite and >= 0, got {lag_s}")
+        self.lag_s = float(lag_s)
+        self._entries: list[Filtered] = []  # the entries from the first unfinished one on
+
+    @property
+    def pending(self) -> int:
+        """Entries pushed and not returned yet."""
+        return len(self._entries)
+
+    def push(self, entry: Filtered) -> list[tuple[Filtered, FloatArray, FloatArray]]:
+        """Add the segment's next entry; returns the entries now final, smoothed, in order."""
+        if self._entries and entry.t < self._entries[-1].t:
+            raise ValueError(f"entry at {entry.t} is older than the last ({self._entries[-1].t})")
+        self._entries.append(entry)
+        return self._release(final=False)
+
+    def finish(self) -> list[tuple[Filtered, FloatArray, FloatArray]]:
+        """The segment ended: every remaining entry, smoothed with what there is."""
+        out = self._release(final=True)
+        self._entries.clear()
+        return out
+
+    def _release(self, final: bool) -> list[tuple[Filtered, FloatArray, FloatArray]]:
+        es = self._entries
+        n = len(es)
+        out: list[tuple[Filtered, FloatArray, FloatArray]] = []
+        k = 0
+        j = 0
+        while k < n:
+            horizon = es[k].t + self.lag_s
+            if not final and es[-1].t <= horizon:
+                break  # entries within the lag may still come
+            j = max(j, k)
+            while j + 1 < n and es[j + 1].t <= horizon:
+                j += 1
+            xs, Ps = es[j].x, es[j].P
+            for i in range(j - 1, k - 1, -1):
+                xs, Ps = _backward(es, xs, Ps, i)
+            out.append((es[k], xs, Ps))
+            k += 1
+        del es[:k]
+        return out
