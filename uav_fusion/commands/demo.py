@@ -159,6 +159,10 @@ def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: s
     ov = _overrides(args, flight_dir, out)
     ov["fusion_node"]["profile"] = profile
     ov["radar_replay"]["profile"] = profile
+    from uav_fusion.core.estimator import load_profile
+
+    if load_profile(profile).uses_tracker:  # score the fixed-rate output too
+        ov["evaluator_node"]["grid_topic"] = "fusion/odom"
     ctx = Context()
     rclpy.init(context=ctx, args=[])
     graph: Graph | None = None

@@ -404,3 +404,56 @@ def grid_from_steps(
     states = sg.feed_steps(steps)
     states.extend(sg.emitter.finish())
     return stack_states(states, frequency_hz, profile.max_coast_s, sg.confirmed_tracks)
+
+
+def on_grid(t: float, frequency_hz: float, tol: float = 1.0e-6) -> bool:
+    """Is ``t`` (seconds) an epoch ``k / frequency_hz`` (within ``tol`` of an epoch step)?"""
+    k = round(t * frequency_hz)
+    return abs(t * frequency_hz - k) <= tol
+
+
+def grid_from_published(
+    times: Sequence[float],
+    xs: Sequence[Sequence[float]],
+    Ps: Sequence[FloatArray],
+    frequency_hz: float,
+    t0: float,
+    t1: float,
+    max_coast_s: float | None = None,
+) -> Grid:
+    """The fixed-rate output as a subscriber sees it: every epoch ``k / frequency`` in
+    ``[t0, t1]``, with the published states received (``times``, ``xs``, ``Ps``) and nothing
+    at the others. What a message cannot carry is unknown: ages NaN, sources "", one track."""
+    if not (math.isfinite(frequency_hz) and frequency_hz > 0):
+        raise ValueError(f"frequency_hz must be finite and > 0, got {frequency_hz}")
+    em = GridEmitter(frequency_hz, None, lambda x, P, dt: (x, P))
+    k0 = em.first_epoch(t0)
+    k1 = math.floor(t1 * frequency_hz)
+    while em.epoch_time(k1 + 1) <= t1:
+        k1 += 1
+    while k1 >= k0 and em.epoch_time(k1) > t1:
+        k1 -= 1
+    n = max(0, k1 - k0 + 1)
+    t = np.array([em.epoch_time(k) for k in range(k0, k0 + n)], dtype=float)
+    x = np.full((n, 6), math.nan)
+    P = np.full((n, 6, 6), math.nan)
+    pub = np.zeros(n, dtype=bool)
+    for ti, xi, Pi in zip(times, xs, Ps, strict=True):
+        i = round(ti * frequency_hz) - k0
+        if 0 <= i < n:
+            x[i] = np.asarray(xi, dtype=float)
+            P[i] = np.asarray(Pi, dtype=float)
+            pub[i] = True
+    return Grid(
+        frequency_hz=float(frequency_hz),
+        max_coast_s=max_coast_s,
+        t=t,
+        x=x,
+        P=P,
+        has_track=pub.copy(),
+        published=pub,
+        age_s=np.full(n, math.nan),
+        track_id=np.where(pub, 0, -1).astype(np.int64),
+        last_source=np.full(n, "", dtype=str),
+        confirmed_tracks=1 if pub.any() else 0,
+    )

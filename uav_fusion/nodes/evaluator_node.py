@@ -6,7 +6,12 @@ Subscribes (topic names are parameters; defaults from docs/graph.md):
 - ``radar/raw`` (geometry_msgs/PoseWithCovarianceStamped): every UAV-class radar report;
 - ``rf/fix`` (geometry_msgs/PointStamped): every RF attempt, failed ones as x = y = z = NaN;
 - ``fusion/accepted/radar``, ``fusion/accepted/rf``: the measurements the filter accepted;
-- ``fusion/odom/updated``, ``fusion/odom/coasted`` (nav_msgs/Odometry): the filter's steps.
+- ``fusion/odom/updated``, ``fusion/odom/coasted`` (nav_msgs/Odometry): the filter's steps;
+- with ``grid_topic`` set (e.g. ``fusion/odom`` of a tracker profile): the fixed-rate output,
+  scored on its grid (``grid_hz``) like the accuracy benchmark (:mod:`uav_fusion.core.
+  gridscore`: coverage of the airborne epochs, error mean / p95 / max, gross share, ANEES);
+  the figures go into the report's header and metrics.json. A message off the grid is
+  counted (``off_grid``) and not scored.
 
 Every message goes into a :class:`uav_fusion.core.evaluation.Evaluator`; nothing is scored on
 arrival, so estimates that arrive before the truth bracketing them are scored exactly once
@@ -48,6 +53,9 @@ from std_srvs.srv import Trigger
 from uav_fusion.core.dataset import fmt_utc, load_flight
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
+from uav_fusion.core.grid import grid_from_published, on_grid
+from uav_fusion.core.gridscore import FlightTruth, GridScore, score_grid
+from uav_fusion.core.gridscore import pool as pool_grid
 from uav_fusion.core.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.ros.conversions import (
@@ -101,6 +109,10 @@ PARAMS: tuple[Param, ...] = (
     Param("rcs_flight_dir", "",
           "flight folder whose radar file supplies each raw report's RCS for the RCS "
           "histogram (standard pose messages carry no RCS); '' = no RCS"),
+    Param("grid_topic", "",
+          "fixed-rate output to score on its grid ('' = none; fusion/odom of tracker profiles)"),
+    Param("grid_hz", 10.0, "rate of grid_topic (the fusion node's frequency)", lo=0.01,
+          hi=1000.0),
     Param("clock_jump_back_s", 1.0,
           "a backwards jump of the simulated clock larger than this restarts the evaluation",
           lo=0.0, hi=1e9),
@@ -139,6 +151,11 @@ class EvaluatorNode(Node):
         self.accepted_rf_topic = str(v["accepted_rf_topic"])
         self.updated_topic = str(v["odom_updated_topic"])
         self.coasted_topic = str(v["odom_coasted_topic"])
+        self.grid_topic = str(v["grid_topic"])
+        self.grid_hz = float(v["grid_hz"])
+        # the fixed-rate output received (t, x, P) and the truth's height (t, h) for scoring it
+        self._grid: list[tuple[float, Any, Any]] = []
+        self._truth_h: list[tuple[float, float, float, float, float]] = []
         frame = str(v["frame_id"])
         self.output_dir = Path(str(v["output_dir"]))
         tolerance = float(v["coverage_tolerance_s"])
@@ -180,6 +197,8 @@ class EvaluatorNode(Node):
         self.create_subscription(PointStamped, self.accepted_rf_topic, self._on_accepted_rf, qos)
         self.create_subscription(Odometry, self.updated_topic, self._on_updated, qos)
         self.create_subscription(Odometry, self.coasted_topic, self._on_coasted, qos)
+        if self.grid_topic:
+            self.create_subscription(Odometry, self.grid_topic, self._on_grid, qos)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/write_report", self._on_write_report)
         self._logged_at = -1
@@ -222,6 +241,8 @@ class EvaluatorNode(Node):
             where = f"not written ({exc})"
         with self._lock:
             self.evaluator = self._new_evaluator()
+            self._grid.clear()
+            self._truth_h.clear()
         self.get_logger().warning(
             f"simulated clock jumped back {last - now:.3f} s (from {last:.3f} to {now:.3f}; a "
             f"bag loop?): evaluation restarted; report of the finished timeline: {where}"
@@ -247,7 +268,39 @@ class EvaluatorNode(Node):
 
     def _truth(self, msg: NavSatFix) -> bool:
         fix = navsatfix_to_truth(msg, self.site)
-        return self.evaluator.add_truth(fix.t, fix.e, fix.n, fix.u)
+        kept = self.evaluator.add_truth(fix.t, fix.e, fix.n, fix.u)
+        if kept and self.grid_topic:
+            self._truth_h.append((fix.t, fix.e, fix.n, fix.u, fix.h))
+        return kept
+
+    def _grid_state(self, msg: Odometry) -> bool:
+        self._check_frame(msg.header.frame_id)
+        s = odometry_to_state(msg)
+        if s.t == 0.0:
+            raise MessageError("zero_stamp", "message has no stamp (0)")
+        if not on_grid(s.t, self.grid_hz):
+            raise MessageError("off_grid", f"stamp {s.t:.6f} is not a {self.grid_hz:g} Hz epoch")
+        self._grid.append((s.t, s.x, s.P))
+        return True
+
+    def grid_score(self) -> GridScore | None:
+        """The fixed-rate output received so far, scored on its grid against the truth
+        (None without ``grid_topic`` or without truth)."""
+        with self._lock:
+            truth = sorted(self._truth_h)
+            grid_msgs = sorted(self._grid, key=lambda g: g[0])
+        if not self.grid_topic or len(truth) < 2:
+            return None
+        t = np.array([r[0] for r in truth])
+        keep = np.concatenate(([True], np.diff(t) > 0))
+        arr = np.array(truth)[keep]
+        ft = FlightTruth(arr[:, 0], arr[:, 1:4], arr[:, 4] - self.site.takeoff_h)
+        t0, t1 = ft.span
+        grid = grid_from_published(
+            [g[0] for g in grid_msgs], [g[1] for g in grid_msgs], [g[2] for g in grid_msgs],
+            self.grid_hz, t0, t1,
+        )  # fmt: skip
+        return pool_grid([score_grid(grid, ft)])
 
     def _radar_raw(self, msg: PoseWithCovarianceStamped) -> bool:
         m = msg_to_radar_measurement(msg, self.frame_id)
@@ -303,6 +356,9 @@ class EvaluatorNode(Node):
 
     def _on_coasted(self, msg: Odometry) -> None:
         self._guard(self.coasted_topic, lambda m: self._step(m, COASTED), msg)
+
+    def _on_grid(self, msg: Odometry) -> None:
+        self._guard(self.grid_topic, self._grid_state, msg)
 
     # --- output ----------------------------------------------------------------------------
     def evaluate(self) -> Evaluation:
@@ -388,6 +444,13 @@ class EvaluatorNode(Node):
             "fused step gaps": self.gap_text(ev),
             "clock jumps back": str(self.clock_jumps_back),
         }
+        gs = self.grid_score()
+        if gs is not None:
+            info[f"fixed-rate output ({self.grid_topic}, {self.grid_hz:g} Hz)"] = (
+                f"coverage {gs.coverage_pct:.1f} % of {gs.epochs} airborne epochs; error mean "
+                f"{gs.err_mean_m:.1f} m, p95 {gs.err_p95_m:.1f} m, max {gs.err_max_m:.1f} m; "
+                f"> 100 m {gs.gross_pct:.1f} %; ANEES {gs.anees:.2f} (3 when honest)"
+            )
         out = self.output_dir if folder is None else folder
         files = write_report(ev, out, self.site, info, figures=self.figures)
         self.last_report = files

@@ -179,6 +179,8 @@ class Graph:
         n = self.published("truth_replay") + self.driver.published_to(self.rf.pub)
         if self.radar.pub_raw is not None:
             n += self.driver.published_to(self.radar.pub_raw)
+        if self.evaluator is not None and bool(self.evaluator.grid_topic):
+            n += f.grid_published
         return n + f.steps_published + f.accepted_published
 
     def evaluator_caught_up(self) -> bool:
