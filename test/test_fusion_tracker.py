@@ -21,6 +21,7 @@ from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator import load_profile
+from uav_fusion.core.estimator.multi import MultiGrid, MultiTracker
 from uav_fusion.core.estimator.runner import run_tracker, smooth_steps, tracker_stream
 from uav_fusion.core.estimator.tracker import Tracker
 from uav_fusion.core.grid import StepGrid
@@ -225,4 +226,40 @@ def test_live_fixed_lag_smoothing_equals_the_offline_one(
     # and it is not the filtered track: smoothing moved the estimates
     filt = [s for s in steps if s.counted]
     assert np.max(np.abs(np.array([s.x for s in filt]) - np.array([s.x for s in smoothed]))) > 1.0
+    h.destroy()
+
+
+def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
+    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+) -> None:
+    frames, attempts, stream = flight_data
+    site = load_site()
+    profile = load_profile("tracker")
+    mt = MultiTracker(profile, site)
+    grid = MultiGrid(mt, 10.0)
+    expected = []
+    for item in stream:
+        expected.extend(grid.before(item.t))
+        if isinstance(item, RadarFrame):
+            mt.process_radar_frame(item)
+        else:
+            mt.process_rf(item)
+    rows = [(ep.t, f"track_{o.track_id}", o.x) for ep in expected for o in ep.tracks]
+    assert len(rows) > 1000
+    h = Harness(ctx, multi_target=True, idle_flush_s=0.0, stall_timeout_s=0.0)
+    got: list[Odometry] = []
+    h.io.create_subscription(Odometry, "fusion/tracks", got.append, stream_qos(20000))
+    h.spin_until(lambda: h.fusion.pub_tracks.get_subscription_count() > 0)
+    h.feed(_order(frames, attempts, 0.0, 5))
+    h.spin_until(lambda: h.got() == len(frames) + len(attempts))
+    h.fusion.flush()
+    h.spin_until(lambda: len(got) == len(rows))
+    live = [(cv.time_from_stamp(m.header.stamp), m.child_frame_id, cv.odometry_to_state(m).x)
+            for m in got]  # fmt: skip
+    assert [(t, c) for t, c, _ in live] == [(t, c) for t, c, _ in rows]
+    assert max(float(np.max(np.abs(a[2] - b[2]))) for a, b in zip(live, rows, strict=True)) < 1e-9
+    markers = h.fusion.markers_message().markers
+    assert {m.ns for m in markers} >= {"tracks", "tracks_covariance", "tracks_label"}
+    diag = h.fusion.diagnostics()
+    assert int(diag["tracks_published"]) == len(rows)
     h.destroy()

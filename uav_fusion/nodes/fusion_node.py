@@ -74,11 +74,12 @@ from visualization_msgs.msg import MarkerArray
 
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.estimator import FusionEstimator, Profile, load_profile
+from uav_fusion.core.estimator.multi import GridEpoch, MultiGrid, MultiTracker
 from uav_fusion.core.estimator.runner import TrackerItem, feed_tracker, tracker_item
 from uav_fusion.core.estimator.smoothing import Filtered, FixedLagSmoother
 from uav_fusion.core.estimator.tracker import Tracker, TrackerStep, radar_model_from_profile
 from uav_fusion.core.grid import GridState, StepGrid
-from uav_fusion.core.records import RADAR, RF, Measurement
+from uav_fusion.core.records import RADAR, RF, Measurement, RadarFrame
 from uav_fusion.core.reorder import Batch, ReorderBuffer
 from uav_fusion.core.site import load_site
 from uav_fusion.core.timeline import Timeline, TimelineConfig
@@ -87,7 +88,13 @@ from uav_fusion.ros.diagnostics import InputMonitor, make_status
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import DIAGNOSTICS_QOS, stream_qos
 from uav_fusion.ros.runtime import run_node
-from uav_fusion.ros.visualization import ReportLayer, SiteLayer, TrackLayer, Visualization
+from uav_fusion.ros.visualization import (
+    ReportLayer,
+    SiteLayer,
+    TrackLayer,
+    TracksLayer,
+    Visualization,
+)
 
 NODE_NAME = "fusion_node"
 #: most messages taken from one input in one go (bounds the time other callbacks wait)
@@ -131,6 +138,14 @@ def fusion_params() -> list[Param]:
         topic("path_topic", "fusion/path", "the fused track (nav_msgs/Path)"),
         topic("markers_topic", "fusion/markers", "views (visualization_msgs/MarkerArray)"),
         topic("fix_topic", "fusion/fix", "fused position as sensor_msgs/NavSatFix"),
+        Param(
+            "multi_target", False,
+            "tracker profiles: also run the multi-UAV tracker and publish every confirmed "
+            "track on tracks_topic",
+        ),
+        topic("tracks_topic", "fusion/tracks",
+              "multi_target: every confirmed track at every grid epoch (Odometry; "
+              "child_frame_id 'track_<id>')"),
         topic("smoothed_topic", "fusion/odom/smoothed",
               "profiles with smoother.lag_s: every step, fixed-lag smoothed (Odometry)"),
         topic("flush_service", "fusion/flush", "std_srvs/Trigger: flush the reorder buffer"),
@@ -233,6 +248,15 @@ class FusionNode(Node):
         self._smooth_segment = -1
         #: smoothed steps published on fusion/odom/smoothed
         self.smoothed_published = 0
+        # every UAV at once (multi_target): the multi-UAV tracker beside the single-UAV one
+        self.multi: MultiTracker | None = None
+        self.multi_grid: MultiGrid | None = None
+        if self.tracker_mode and bool(self.p["multi_target"]):
+            self.multi = MultiTracker(self.profile, self.site)
+            self.multi_grid = MultiGrid(self.multi, float(self.p["frequency"]))
+        #: track messages published on fusion/tracks, and the grid epochs they came from
+        self.tracks_published = 0
+        self.track_epochs = 0
         self._processed_t = -math.inf
         self._stall_s = float(self.p["stall_timeout_s"])
         self.received: Counter[str] = Counter()
@@ -281,6 +305,7 @@ class FusionNode(Node):
         self.pub_acc_rf = pub(PointStamped, self.p["accepted_rf_topic"])
         self.pub_fix = pub(NavSatFix, self.p["fix_topic"])
         self.pub_smoothed = pub(Odometry, self.p["smoothed_topic"])
+        self.pub_tracks = pub(Odometry, self.p["tracks_topic"])
         self.pub_path = pub(NavPath, self.p["path_topic"], DIAGNOSTICS_QOS)
         self.pub_markers = pub(MarkerArray, self.p["markers_topic"], DIAGNOSTICS_QOS)
         self.pub_diag = pub(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
@@ -294,6 +319,10 @@ class FusionNode(Node):
             self.frame,
             [SiteLayer(self.site, range_gate), self.report_layer, self.track_layer],
         )
+        self.tracks_layer: TracksLayer | None = None
+        if self.multi is not None:
+            self.tracks_layer = TracksLayer(sigma=float(self.p["covariance_sigma"]))
+            self.visualization.add(self.tracks_layer)
         self._views_dirty = True
         self._last_view = -math.inf
         self._last_step: Any = None
@@ -532,6 +561,10 @@ class FusionNode(Node):
         self.tracker = Tracker(self.profile, self.site)
         self.grid = StepGrid(self.profile, float(self.p["frequency"]))
         self._processed_t = -math.inf
+        self._smoother = None
+        if self.multi is not None:
+            self.multi = MultiTracker(self.profile, self.site)
+            self.multi_grid = MultiGrid(self.multi, float(self.p["frequency"]))
 
     def warn(self, text: str) -> None:
         self.get_logger().warning(text)
@@ -569,6 +602,13 @@ class FusionNode(Node):
                 item = m.item if isinstance(m, TrackerItem) else None
                 if item is None:
                     continue
+                if self.multi is not None and self.multi_grid is not None:
+                    for ep in self.multi_grid.before(item.t):
+                        self._publish_tracks(ep)
+                    if isinstance(item, RadarFrame):
+                        self.multi.process_radar_frame(item)
+                    else:
+                        self.multi.process_rf(item)
                 for step in feed_tracker(tracker, item):
                     self._publish_tracker_step(step)
                     for gs in grid.feed_step(step):
@@ -642,6 +682,23 @@ class FusionNode(Node):
         if self.pub_smoothed.get_subscription_count():
             self.pub_smoothed.publish(cv.state_to_odometry(t, x, P, self.frame, self.child_frame))
 
+    def _publish_tracks(self, ep: GridEpoch) -> None:
+        """One grid epoch of the multi-UAV tracker: every confirmed track on fusion/tracks."""
+        self.track_epochs += 1
+        if self.tracks_layer is not None:
+            self.tracks_layer.update(
+                (o.track_id, o.x[:3].tolist(), o.P[:3, :3].tolist(), o.uav_prob) for o in ep.tracks
+            )
+            self._views_dirty = True
+        if not ep.tracks:
+            return
+        self.tracks_published += len(ep.tracks)
+        if self.pub_tracks.get_subscription_count():
+            for o in ep.tracks:
+                self.pub_tracks.publish(
+                    cv.state_to_odometry(ep.t, o.x, o.P, self.frame, f"track_{o.track_id}")
+                )
+
     def _publish_grid(self, gs: GridState) -> None:
         """One epoch of the fixed-rate output (nothing without a published track)."""
         if not gs.published:
@@ -669,6 +726,9 @@ class FusionNode(Node):
         before = self.grid_published
         for gs in grid.advance(target):
             self._publish_grid(gs)
+        if self.multi_grid is not None:
+            for ep in self.multi_grid.advance(target):
+                self._publish_tracks(ep)
         return self.grid_published - before
 
     def _publish_step(self, step: Any, by_seq: dict[int, Measurement]) -> None:
@@ -832,6 +892,11 @@ class FusionNode(Node):
         tr = self.tracker
         assert tr is not None
         out: dict[str, Any] = {"grid_published": self.grid_published}
+        if self.multi is not None:
+            confirmed = [t for t in self.multi.tracks if t.confirmed]
+            out["multi_tracks_confirmed"] = len(confirmed)
+            out["multi_track_ids"] = " ".join(str(t.id) for t in confirmed) or "-"
+            out["tracks_published"] = self.tracks_published
         out["received_radar_reports"] = self.received_reports
         best = tr.best_track()
         ref = self._processed_t

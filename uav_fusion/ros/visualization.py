@@ -15,13 +15,16 @@ layer                  namespace(s)            what
 :class:`ReportLayer`   ``radar_accepted``,     the last ``history`` radar reports that passed
                        ``radar_rejected``,     every gate / were refused, and RF fixes
                        ``rf_fixes``            (blue used, orange refused)
+:class:`TracksLayer`   ``tracks``,             every confirmed UAV track of the multi-UAV
+                       ``tracks_covariance``,  tracker (marker id = track id): position,
+                       ``tracks_label``,       covariance ellipsoid, "<id> p=<UAV
+                       ``tracks_trail``        probability>" label and its recent trail; a
+                                               track that ended is deleted
 =====================  ======================  ==============================================
 
-A later multi-track layer adds itself with :meth:`Visualization.add` (e.g. one
-:class:`TrackLayer` per track id, with ``namespace=f"track_{id}"``): layers never share a
-namespace. No ``/tf`` is published (no tf2 message package is installed with the wheels):
-every marker carries the world frame id (the site's ENU frame, ``enu_lw1``), which RViz
-accepts as its fixed frame.
+Layers never share a namespace. No ``/tf`` is published (no tf2 message package is installed
+with the wheels): every marker carries the world frame id (the site's ENU frame,
+``enu_lw1``), which RViz accepts as its fixed frame.
 """
 
 from __future__ import annotations
@@ -181,6 +184,68 @@ class TrackLayer:
         e.pose.orientation = Quaternion(x=qx, y=qy, z=qz, w=qw)
         e.color = ELLIPSOID
         return [s, e]
+
+
+class TracksLayer:
+    """Every confirmed track of the multi-UAV tracker (see the module table)."""
+
+    def __init__(self, sigma: float = 2.0, radius_m: float = 6.0, trail: int = 100) -> None:
+        self.namespaces: tuple[str, ...] = (
+            "tracks", "tracks_covariance", "tracks_label", "tracks_trail",
+        )  # fmt: skip
+        self.sigma = sigma
+        self.radius_m = radius_m
+        self.trail_len = trail
+        self._now: dict[int, tuple[tuple[float, float, float], list[list[float]], float]] = {}
+        self._trails: dict[int, deque[tuple[float, float, float]]] = {}
+        self._gone: set[int] = set()
+
+    def update(
+        self, tracks: Iterable[tuple[int, Sequence[float], Sequence[Sequence[float]], float]]
+    ) -> None:
+        """The confirmed tracks now: (id, position, 3x3 covariance, UAV probability)."""
+        now: dict[int, tuple[tuple[float, float, float], list[list[float]], float]] = {}
+        for tid, pos, cov, prob in tracks:
+            p = (float(pos[0]), float(pos[1]), float(pos[2]))
+            now[int(tid)] = (p, [[float(v) for v in row[:3]] for row in cov[:3]], float(prob))
+            trail = self._trails.setdefault(int(tid), deque(maxlen=self.trail_len))
+            trail.append(p)
+        self._gone |= set(self._now) - set(now)
+        for tid in set(self._trails) - set(now):
+            del self._trails[tid]
+        self._now = now
+
+    def markers(self, stamp: Time, frame_id: str) -> list[Marker]:
+        out: list[Marker] = []
+        for tid in sorted(self._gone):  # ended tracks: remove their markers
+            for ns in self.namespaces:
+                m = _marker(ns, tid, Marker.SPHERE, stamp, frame_id)
+                m.action = Marker.DELETE
+                out.append(m)
+        self._gone.clear()
+        d = 2.0 * self.radius_m
+        for tid, (p, cov, prob) in sorted(self._now.items()):
+            s = _marker("tracks", tid, Marker.SPHERE, stamp, frame_id)
+            s.pose.position = _pt(*p)
+            s.scale = Vector3(x=d, y=d, z=d)
+            s.color = TRACK
+            e = _marker("tracks_covariance", tid, Marker.SPHERE, stamp, frame_id)
+            e.pose.position = _pt(*p)
+            (dx, dy, dz), (qx, qy, qz, qw) = ellipsoid_pose(cov, self.sigma)
+            e.scale = Vector3(x=max(dx, 0.01), y=max(dy, 0.01), z=max(dz, 0.01))
+            e.pose.orientation = Quaternion(x=qx, y=qy, z=qz, w=qw)
+            e.color = ELLIPSOID
+            lab = _marker("tracks_label", tid, Marker.TEXT_VIEW_FACING, stamp, frame_id)
+            lab.pose.position = _pt(p[0], p[1], p[2] + 3.0 * self.radius_m)
+            lab.scale = Vector3(x=0.0, y=0.0, z=2.0 * self.radius_m)
+            lab.color = TRACK
+            lab.text = f"{tid} p={prob:.2f}"
+            tr = _marker("tracks_trail", tid, Marker.LINE_STRIP, stamp, frame_id)
+            tr.scale = Vector3(x=0.3 * self.radius_m, y=0.0, z=0.0)
+            tr.color = TRACK
+            tr.points = [_pt(*q) for q in self._trails.get(tid, ())]
+            out += [s, e, lab, tr]
+        return out
 
 
 class ReportLayer:

@@ -45,6 +45,7 @@ A track's UAV probability is the logistic of the UAV score of the radar object i
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -449,6 +450,71 @@ class GridEpoch:
     tracks: tuple[TrackOutput, ...]
 
 
+class MultiGrid:
+    """The confirmed tracks at every grid epoch ``k / frequency_hz``, emitted as processed time
+    passes it (the same for a live node and an offline run): call :meth:`before` with an
+    item's time before feeding the item to the tracker, :meth:`advance` when everything up to
+    a time has been processed. Each track is predicted to the epoch, while its last accepted
+    measurement is at most the profile's ``max_coast_s`` old. No epoch before ``t0`` (default:
+    the first time seen) or after ``t1``."""
+
+    def __init__(
+        self,
+        tracker: MultiTracker,
+        frequency_hz: float,
+        t0: float | None = None,
+        t1: float | None = None,
+    ) -> None:
+        if not (math.isfinite(frequency_hz) and frequency_hz > 0):
+            raise ValueError(f"grid rate must be finite and > 0, got {frequency_hz}")
+        self.tracker = tracker
+        self.frequency_hz = float(frequency_hz)
+        self._k: int | None = None if t0 is None else self.first_epoch(float(t0))
+        self._t1 = math.inf if t1 is None else float(t1)
+        self.max_coast_s = tracker.profile.max_coast_s
+
+    def epoch_time(self, k: int) -> float:
+        return k / self.frequency_hz
+
+    def first_epoch(self, t: float) -> int:
+        """The smallest ``k`` with ``k / frequency >= t``."""
+        k = math.ceil(t * self.frequency_hz)
+        while self.epoch_time(k - 1) >= t:
+            k -= 1
+        while self.epoch_time(k) < t:
+            k += 1
+        return k
+
+    def _emit(self, inside: Callable[[float], bool]) -> list[GridEpoch]:
+        out: list[GridEpoch] = []
+        if self._k is None:
+            return out
+        while True:
+            g = self.epoch_time(self._k)
+            if g > self._t1 or not inside(g):
+                return out
+            mc = self.max_coast_s
+            tracks = tuple(
+                o
+                for o in self.tracker.outputs(g)
+                if o.t <= g and (mc is None or g - o.last_update_t <= mc)
+            )
+            out.append(GridEpoch(g, tracks))
+            self._k += 1
+
+    def before(self, t: float) -> list[GridEpoch]:
+        """An item at ``t`` is about to be processed: every epoch before ``t``."""
+        if self._k is None:
+            self._k = self.first_epoch(t)
+        return self._emit(lambda g: g < t)
+
+    def advance(self, t: float) -> list[GridEpoch]:
+        """Everything up to ``t`` has been processed: every epoch up to ``t``."""
+        if self._k is None:
+            self._k = self.first_epoch(t)
+        return self._emit(lambda g: g <= t)
+
+
 def run_multi(
     tracker: MultiTracker,
     stream: list[RadarFrame | RfAttempt],
@@ -457,36 +523,16 @@ def run_multi(
     t_end: float,
 ) -> list[GridEpoch]:
     """Feed ``stream`` (time order) through ``tracker`` and take its confirmed tracks at every
-    grid time ``t_start + k / grid_hz`` up to ``t_end``, as soon as processed time passes it:
-    each track predicted to the epoch, while its last accepted measurement is at most the
-    profile's ``max_coast_s`` old."""
-    if not grid_hz > 0:
-        raise ValueError(f"grid rate must be > 0, got {grid_hz}")
-    step = 1.0 / grid_hz
-    n_epochs = math.floor((t_end - t_start) * grid_hz + 1e-9) + 1 if t_end >= t_start else 0
-    max_coast = tracker.profile.max_coast_s
+    grid epoch ``k / grid_hz`` in ``[t_start, t_end]`` (:class:`MultiGrid`)."""
+    grid = MultiGrid(tracker, grid_hz, t_start, t_end)
     out: list[GridEpoch] = []
-    k = 0
-
-    def emit(until: float) -> None:
-        nonlocal k
-        while k < n_epochs and t_start + k * step <= until:
-            g = t_start + k * step
-            tracks = tuple(
-                o
-                for o in tracker.outputs(g)
-                if o.t <= g and (max_coast is None or g - o.last_update_t <= max_coast)
-            )
-            out.append(GridEpoch(g, tracks))
-            k += 1
-
     for item in stream:
-        emit(item.t if item.t < t_end else t_end)
+        out.extend(grid.before(item.t))
         if isinstance(item, RadarFrame):
             tracker.process_radar_frame(item)
         else:
             tracker.process_rf(item)
-    emit(t_end)
+    out.extend(grid.advance(t_end))
     return out
 
 
