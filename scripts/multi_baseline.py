@@ -26,7 +26,8 @@ frame, or one RF fix):
   beyond the range gate, coasted reports (``association.skip_radar_coasts``: velocity and RCS
   repeating the same radar track's previous report) and fixes with a CEP above
   ``rf.max_cep_m`` are dropped, as ours does; no UAV score or classifier: every other radar
-  report is a detection;
+  report is a detection (``--radar-min-uav-prob P``: a variant that also drops the reports
+  whose own class probability from the radar, ``catProb``, is below ``P``);
 * ``KalmanPredictor`` / ``KalmanUpdater`` (linear);
 * ``DistanceHypothesiser`` with the ``Mahalanobis`` measure: Stone Soup's distance is the
   square root of the NIS and a detection is a hypothesis when it is strictly less than
@@ -177,6 +178,7 @@ class Baseline:
     predictor: KalmanPredictor
     profile: Profile
     site: Site
+    min_radar_uav_prob: float | None = None  # drop reports whose own class probability is lower
 
     def __post_init__(self) -> None:
         p = self.profile
@@ -211,6 +213,10 @@ class Baseline:
             if coasting and self.skip_coasts:
                 self._drop("coast")
                 continue
+            pmin = self.min_radar_uav_prob
+            if pmin is not None and not (trk.uav_prob is not None and trk.uav_prob >= pmin):
+                self._drop("class")
+                continue
             R = packed_to_array(self.radar_r.r_at(trk.e, trk.n, trk.u))
             out.add(
                 Detection(
@@ -238,8 +244,12 @@ class Baseline:
         )
 
 
-def build_baseline(profile: Profile, site: Site) -> Baseline:
-    """The Stone Soup multi-target tracker with the profile's parameters (module text)."""
+def build_baseline(
+    profile: Profile, site: Site, min_radar_uav_prob: float | None = None
+) -> Baseline:
+    """The Stone Soup multi-target tracker with the profile's parameters (module text);
+    ``min_radar_uav_prob``: also drop radar reports whose own UAV class probability is lower
+    (or missing)."""
     if profile.motion_model != "cv":
         raise ValueError(f"the baseline needs a CV motion profile, {profile.name!r} is not one")
     p = profile
@@ -279,7 +289,7 @@ def build_baseline(profile: Profile, site: Site) -> Baseline:
         updater=updater,
     )
     tracker.detector_iter = None
-    return Baseline(tracker, predictor, profile, site)
+    return Baseline(tracker, predictor, profile, site, min_radar_uav_prob)
 
 
 def _last_update_t(track: Track) -> float:
@@ -440,7 +450,13 @@ def _fmt_cov(f: Figures) -> str:
     return ", ".join(parts) or "-"
 
 
-def compare(folder: Path, profile: Profile, site: Site, grid_hz: float) -> dict[str, Any]:
+def compare(
+    folder: Path,
+    profile: Profile,
+    site: Site,
+    grid_hz: float,
+    min_radar_uav_prob: float | None = None,
+) -> dict[str, Any]:
     flight = load_flight(folder, site)
     stream = list(tracker_stream(flight, profile))
     t0, t1 = truth_span(flight, stream)
@@ -448,7 +464,7 @@ def compare(folder: Path, profile: Profile, site: Site, grid_hz: float) -> dict[
     c = time.perf_counter()
     ours = run_multi(mt, stream, grid_hz, t0, t1)
     t_ours = time.perf_counter() - c
-    b = build_baseline(profile, site)
+    b = build_baseline(profile, site, min_radar_uav_prob)
     c = time.perf_counter()
     base = run_baseline_stream(b, stream, grid_hz, t0, t1)
     t_ss = time.perf_counter() - c
@@ -496,6 +512,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", default="tracker", help="tracker profile (default: tracker)")
     ap.add_argument("--grid-hz", type=float, default=1.0, help="output grid rate (default: 1)")
     ap.add_argument("--site", default=None, help="site YAML (default: the shipped site)")
+    ap.add_argument(
+        "--radar-min-uav-prob",
+        type=float,
+        default=None,
+        help="baseline only: drop radar reports whose own UAV class probability (catProb) is "
+        "below this or missing (default: keep every report)",
+    )
     args = ap.parse_args(argv)
     if not (math.isfinite(args.grid_hz) and args.grid_hz > 0):
         ap.error(f"--grid-hz must be > 0, got {args.grid_hz}")
@@ -503,7 +526,10 @@ def main(argv: list[str] | None = None) -> int:
     if not profile.uses_tracker:
         ap.error(f"{profile.name!r} is not a tracker profile (association.mode track_score)")
     site = load_site(args.site)
-    rows = [compare(folder, profile, site, args.grid_hz) for folder in args.folders]
+    rows = [
+        compare(folder, profile, site, args.grid_hz, args.radar_min_uav_prob)
+        for folder in args.folders
+    ]
     print_table(rows)
     return 0
 

@@ -102,6 +102,13 @@ def test_detections_carry_our_r_and_the_same_drops(
     assert profile.rf_max_cep_m is not None
     bad = RfAttempt(12.0, 2, True, 0.0, 0.0, 5.0, 6.0, profile.rf_max_cep_m + 1.0, 4, 4)
     assert b.rf_detection(bad) is None
+    # the variant that also drops reports the radar itself classes below a probability
+    bc = mb.build_baseline(profile, site, 0.5)
+    low = RadarTrack(10.0, 3, 0.0, 0.0, 0.0, *map(float, p), None, 0.3, None, -10.0)
+    unknown = RadarTrack(10.0, 4, 0.0, 0.0, 0.0, *map(float, p), None, None, None, -10.0)
+    high = RadarTrack(10.0, 5, 0.0, 0.0, 0.0, *map(float, p), None, 0.5, None, -10.0)
+    kept = bc.radar_detections(RadarFrame(10.0, (low, unknown, high)))
+    assert [d.metadata["radar_track"] for d in kept] == [5] and bc.dropped == {"class": 2}
 
 
 def test_two_crossing_uavs_get_two_confirmed_tracks(
