@@ -99,7 +99,7 @@ from uav_fusion.core.estimator.multi import GridEpoch, MultiTracker, TrackOutput
 from uav_fusion.core.estimator.runner import tracker_stream
 from uav_fusion.core.estimator.tracker import radar_model_from_profile, rf_model_from_profile
 from uav_fusion.core.metrics import interpolate_truth
-from uav_fusion.core.multiscore import UavTruth, pool, score_flight
+from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, pool, score_flight
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site, load_site
 
@@ -418,8 +418,6 @@ def figures(flight: Flight, epochs: Sequence[GridEpoch], radius_m: float = 100.0
     gospa_m, switches = math.nan, 0
     if truths and epochs:
         step = float(np.median(np.diff(grid_t))) if grid_t.size > 1 else 1.0
-        from uav_fusion.core.multiscore import MultiScoreSettings
-
         sc = pool([score_flight(truths, epochs, MultiScoreSettings(step_s=step))])
         gospa_m, switches = sc.gospa_mean_m, sc.id_switches
     return Figures(
