@@ -60,7 +60,7 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -383,6 +383,7 @@ class Figures:
     track_epochs: int
     gospa_mean_m: float
     id_switches: int
+    epochs: int
 
 
 def figures(flight: Flight, epochs: Sequence[GridEpoch], radius_m: float = 100.0) -> Figures:
@@ -427,6 +428,7 @@ def figures(flight: Flight, epochs: Sequence[GridEpoch], radius_m: float = 100.0
         n_tr,
         gospa_m,
         switches,
+        len(epochs),
     )
 
 
@@ -481,26 +483,44 @@ def compare(
     return {"flight": name, "t_ours": t_ours, "t_ss": t_ss, "ours": fo, "ss": fb}
 
 
-def _pct_cell(f: Figures) -> str:
-    c = sum(x[0] for x in f.coverage.values())
-    n = sum(x[1] for x in f.coverage.values())
+def _pct_cell(fs: Sequence[Figures]) -> str:
+    c = sum(x[0] for f in fs for x in f.coverage.values())
+    n = sum(x[1] for f in fs for x in f.coverage.values())
     return f"{100.0 * c / n:.1f}" if n else "-"
 
 
-def print_table(rows: Iterable[dict[str, Any]]) -> None:
+def print_table(rows: Sequence[dict[str, Any]]) -> None:
+    """Markdown table: one row per flight, then all flights (times summed, coverage pooled
+    over the airborne epochs, counts summed, GOSPA averaged over the epochs)."""
     print()
     print(
         "| flight | ours s | Stone Soup s | ratio | coverage % ours / SS | "
         "false-track epochs ours / SS | confirmed ids ours / SS | GOSPA m ours / SS |"
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for r in rows:
-        fo, fb = r["ours"], r["ss"]
-        ratio = r["t_ss"] / r["t_ours"] if r["t_ours"] > 0 else math.inf
+
+    def line(
+        name: str, t_o: float, t_s: float, fo: Sequence[Figures], fb: Sequence[Figures]
+    ) -> None:
+        ratio = t_s / t_o if t_o > 0 else math.inf
+        g_o = sum(f.gospa_mean_m * f.epochs for f in fo) / max(1, sum(f.epochs for f in fo))
+        g_b = sum(f.gospa_mean_m * f.epochs for f in fb) / max(1, sum(f.epochs for f in fb))
         print(
-            f"| {r['flight']} | {r['t_ours']:.2f} | {r['t_ss']:.2f} | {ratio:.1f} | "
-            f"{_pct_cell(fo)} / {_pct_cell(fb)} | {fo.false_epochs} / {fb.false_epochs} | "
-            f"{fo.confirmed} / {fb.confirmed} | {fo.gospa_mean_m:.1f} / {fb.gospa_mean_m:.1f} |"
+            f"| {name} | {t_o:.2f} | {t_s:.2f} | {ratio:.1f} | "
+            f"{_pct_cell(fo)} / {_pct_cell(fb)} | {sum(f.false_epochs for f in fo)} / "
+            f"{sum(f.false_epochs for f in fb)} | {sum(f.confirmed for f in fo)} / "
+            f"{sum(f.confirmed for f in fb)} | {g_o:.1f} / {g_b:.1f} |"
+        )
+
+    for r in rows:
+        line(r["flight"], r["t_ours"], r["t_ss"], [r["ours"]], [r["ss"]])
+    if len(rows) > 1:
+        line(
+            f"all {len(rows)}",
+            sum(r["t_ours"] for r in rows),
+            sum(r["t_ss"] for r in rows),
+            [r["ours"] for r in rows],
+            [r["ss"] for r in rows],
         )
 
 
