@@ -49,6 +49,15 @@ frame, or one RF fix):
 * ``UpdateTimeDeleter(max_coast_s)``: a confirmed track without an update for more than
   ``max_coast_s`` is deleted.
 
+``--jpda``: the confirmed tracks use ``MultiTargetMixtureTracker`` with ``JPDAwithEHM`` (exact
+JPDA marginals by efficient hypothesis management, per cluster of tracks sharing detections)
+over ``PDAHypothesiser`` hypotheses (detection probability ``--jpda-pd``; clutter density
+non-parametric: the gate volume over the detections inside it; gate ``nis_probability``, the
+squared Mahalanobis distance against the chi-square quantile as ours), capped to the
+``--jpda-max-hypotheses`` most probable detections per track (:class:`CappedHypothesiser`).
+A track counts as updated at a scan when a detection hypothesis outweighs the missed one
+(Stone Soup's rule). The initiator stays as above (GNN).
+
 On the grid, every confirmed track is predicted to the epoch (without changing it) and output
 while its last update is at most ``max_coast_s`` old, with Stone Soup's track id mapped to a
 stable integer, ``uav_prob`` 1 (the baseline has no classifier) and no emitter.
@@ -71,10 +80,12 @@ import numpy.typing as npt
 from scipy.stats import chi2
 from stonesoup.base import Property
 from stonesoup.dataassociator.neighbour import GNNWith2DAssignment
+from stonesoup.dataassociator.probability import JPDAwithEHM
 from stonesoup.deleter.base import Deleter
 from stonesoup.deleter.time import UpdateTimeDeleter
 from stonesoup.hypothesiser.base import Hypothesiser
 from stonesoup.hypothesiser.distance import DistanceHypothesiser
+from stonesoup.hypothesiser.probability import PDAHypothesiser
 from stonesoup.initiator.simple import MultiMeasurementInitiator
 from stonesoup.measures import Mahalanobis
 from stonesoup.models.measurement.linear import LinearGaussian
@@ -83,7 +94,7 @@ from stonesoup.models.transition.linear import (
     ConstantVelocity,
 )
 from stonesoup.predictor.kalman import KalmanPredictor
-from stonesoup.tracker.simple import MultiTargetTracker
+from stonesoup.tracker.simple import MultiTargetMixtureTracker, MultiTargetTracker
 from stonesoup.types.array import CovarianceMatrix, StateVector
 from stonesoup.types.detection import Detection
 from stonesoup.types.multihypothesis import MultipleHypothesis
@@ -170,11 +181,28 @@ class MofNDeleter(Deleter):  # type: ignore[misc]
         return bool(hits + max(0, self.n - states) < self.m)
 
 
+class CappedHypothesiser(Hypothesiser):  # type: ignore[misc]
+    """Keeps the missed-detection hypothesis and the ``max_detections`` most probable
+    detection hypotheses of each track (caps JPDA's joint hypotheses at
+    ``(max_detections + 1)`` per track), renormalised."""
+
+    hypothesiser: Hypothesiser = Property(doc="Probability hypothesiser to cap")
+    max_detections: int = Property(default=3, doc="Detection hypotheses kept per track")
+
+    def hypothesise(
+        self, track: Track, detections: set[Detection], timestamp: datetime, **kwargs: Any
+    ) -> MultipleHypothesis:
+        hyps = self.hypothesiser.hypothesise(track, detections, timestamp, **kwargs)
+        missed = [h for h in hyps if not h]
+        found = sorted((h for h in hyps if h), key=lambda h: h.probability, reverse=True)
+        return MultipleHypothesis(missed + found[: self.max_detections], normalise=True)
+
+
 @dataclass
 class Baseline:
     """The Stone Soup tracker and what turns our records into its detections."""
 
-    tracker: MultiTargetTracker
+    tracker: MultiTargetTracker | MultiTargetMixtureTracker
     predictor: KalmanPredictor
     profile: Profile
     site: Site
@@ -244,12 +272,23 @@ class Baseline:
         )
 
 
+@dataclass(frozen=True)
+class JpdaSettings:
+    """JPDA instead of GNN for the confirmed tracks (the initiator keeps GNN)."""
+
+    prob_detect: float = 0.9
+    max_detections: int = 3  # detection hypotheses per track
+
+
 def build_baseline(
-    profile: Profile, site: Site, min_radar_uav_prob: float | None = None
+    profile: Profile,
+    site: Site,
+    min_radar_uav_prob: float | None = None,
+    jpda: JpdaSettings | None = None,
 ) -> Baseline:
     """The Stone Soup multi-target tracker with the profile's parameters (module text);
     ``min_radar_uav_prob``: also drop radar reports whose own UAV class probability is lower
-    (or missing)."""
+    (or missing); ``jpda``: JPDA (module text) instead of GNN for the confirmed tracks."""
     if profile.motion_model != "cv":
         raise ValueError(f"the baseline needs a CV motion profile, {profile.name!r} is not one")
     p = profile
@@ -281,13 +320,30 @@ def build_baseline(
     )
     max_coast = p.max_coast_s if p.max_coast_s is not None else math.inf
     deleter = UpdateTimeDeleter(timedelta(seconds=min(max_coast, 1e9)))
-    tracker = MultiTargetTracker(
-        initiator=initiator,
-        deleter=deleter,
-        detector=None,
-        data_associator=associator,
-        updater=updater,
-    )
+    tracker: MultiTargetTracker | MultiTargetMixtureTracker
+    if jpda is None:
+        tracker = MultiTargetTracker(
+            initiator=initiator,
+            deleter=deleter,
+            detector=None,
+            data_associator=associator,
+            updater=updater,
+        )
+    else:
+        pda = PDAHypothesiser(
+            predictor,
+            updater,
+            clutter_spatial_density=None,  # non-parametric: gate volume / detections in it
+            prob_detect=jpda.prob_detect,
+            prob_gate=p.nis_probability,
+        )
+        tracker = MultiTargetMixtureTracker(
+            initiator=initiator,
+            deleter=deleter,
+            detector=None,
+            data_associator=JPDAwithEHM(CappedHypothesiser(pda, jpda.max_detections)),
+            updater=updater,
+        )
     tracker.detector_iter = None
     return Baseline(tracker, predictor, profile, site, min_radar_uav_prob)
 
@@ -456,6 +512,7 @@ def compare(
     site: Site,
     grid_hz: float,
     min_radar_uav_prob: float | None = None,
+    jpda: JpdaSettings | None = None,
 ) -> dict[str, Any]:
     flight = load_flight(folder, site)
     stream = list(tracker_stream(flight, profile))
@@ -464,7 +521,7 @@ def compare(
     c = time.perf_counter()
     ours = run_multi(mt, stream, grid_hz, t0, t1)
     t_ours = time.perf_counter() - c
-    b = build_baseline(profile, site, min_radar_uav_prob)
+    b = build_baseline(profile, site, min_radar_uav_prob, jpda)
     c = time.perf_counter()
     base = run_baseline_stream(b, stream, grid_hz, t0, t1)
     t_ss = time.perf_counter() - c
@@ -537,7 +594,22 @@ def main(argv: list[str] | None = None) -> int:
         help="baseline only: drop radar reports whose own UAV class probability (catProb) is "
         "below this or missing (default: keep every report)",
     )
+    ap.add_argument(
+        "--jpda",
+        action="store_true",
+        help="baseline: JPDA (Stone Soup's JPDAwithEHM, PDA hypotheses) instead of GNN",
+    )
+    ap.add_argument("--jpda-pd", type=float, default=0.9, help="JPDA detection probability")
+    ap.add_argument(
+        "--jpda-max-hypotheses",
+        type=int,
+        default=3,
+        help="JPDA: detection hypotheses kept per track (the most probable; default 3)",
+    )
     args = ap.parse_args(argv)
+    jpda = JpdaSettings(args.jpda_pd, args.jpda_max_hypotheses) if args.jpda else None
+    if jpda is not None and not (0.0 < jpda.prob_detect < 1.0 and jpda.max_detections >= 1):
+        ap.error("--jpda-pd must lie in (0, 1) and --jpda-max-hypotheses be >= 1")
     if not (math.isfinite(args.grid_hz) and args.grid_hz > 0):
         ap.error(f"--grid-hz must be > 0, got {args.grid_hz}")
     profile = load_profile(args.profile)
@@ -545,7 +617,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"{profile.name!r} is not a tracker profile (association.mode track_score)")
     site = load_site(args.site)
     rows = [
-        compare(folder, profile, site, args.grid_hz, args.radar_min_uav_prob)
+        compare(folder, profile, site, args.grid_hz, args.radar_min_uav_prob, jpda)
         for folder in args.folders
     ]
     print_table(rows)

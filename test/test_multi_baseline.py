@@ -181,3 +181,17 @@ def test_holding_deleter_is_our_m_of_n(mb: ModuleType) -> None:
                     elif deleter.check_for_deletion(track):
                         ss_state = "failed"
             assert ss_state == ours_state, (m, n, pattern)
+
+
+def test_jpda_variant_tracks_both_uavs(mb: ModuleType, profile: Profile, site: Site) -> None:
+    sc = Crossing(site, seed=1)
+    b = mb.build_baseline(profile, site, None, mb.JpdaSettings(prob_detect=0.9, max_detections=2))
+    epochs = mb.run_baseline_stream(b, sc.stream(), 1.0, 1000.0, 1099.0)
+    clutter = sc.r0 + np.array([100.0, 250.0, 30.0])
+    for ep in epochs[5:]:
+        objects = (sc.a(ep.t - 1000.0), sc.b(ep.t - 1000.0), clutter)
+        dist = np.array([[np.linalg.norm(o.x[:3] - q) for o in ep.tracks] for q in objects])
+        # one track per object (no duplicates), each UAV with a track within 50 m; JPDA's
+        # shared detections may swap two ids where a UAV passes the reflector (t = 37 s)
+        assert len(ep.tracks) == 3
+        assert dist[0].min() < 50.0 and dist[1].min() < 50.0
