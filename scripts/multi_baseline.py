@@ -1,6 +1,7 @@
 """Multi-UAV baseline: a Stone Soup multi-target tracker over the same inputs as ours.
 
     python scripts/multi_baseline.py FLIGHT_FOLDER [...] [--profile tracker] [--grid-hz 1]
+        [--radar-min-uav-prob P] [--jpda [--jpda-pd PD] [--jpda-max-hypotheses K]]
 
 For every flight, the multi-UAV tracker (:func:`uav_fusion.core.estimator.multi.run_multi`)
 and the Stone Soup baseline (:func:`run_stonesoup`) run over the same time-ordered radar
