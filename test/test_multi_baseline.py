@@ -1,0 +1,197 @@
+"""The Stone Soup multi-target baseline of scripts/multi_baseline.py: the same motion noise and
+measurement covariances as ours, and two confirmed tracks on two crossing UAVs."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from datetime import timedelta
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+from test_multi_tracker import Crossing
+
+from uav_fusion.core.estimator import load_profile
+from uav_fusion.core.estimator.components import packed_to_array
+from uav_fusion.core.estimator.kalman import CvKalman
+from uav_fusion.core.estimator.models import cv_process_noise
+from uav_fusion.core.estimator.profile import Profile
+from uav_fusion.core.estimator.tracker import radar_model_from_profile, rf_model_from_profile
+from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
+from uav_fusion.core.site import Site, load_site
+
+pytest.importorskip("stonesoup")
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "multi_baseline.py"
+
+
+@pytest.fixture(scope="module")
+def mb() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("multi_baseline", SCRIPT)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["multi_baseline"] = mod  # dataclasses look their module up
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def site() -> Site:
+    return load_site()
+
+
+@pytest.fixture(scope="module")
+def profile() -> Profile:
+    return load_profile("tracker")
+
+
+@pytest.mark.parametrize("dt", [0.25, 1.0, 3.5])
+def test_transition_noise_is_our_cv_q(mb: ModuleType, profile: Profile, dt: float) -> None:
+    model = mb.transition_model(profile.q)
+    idx = mb.SS_TO_OURS
+    Q = np.asarray(model.covar(time_interval=timedelta(seconds=dt)))[np.ix_(idx, idx)]
+    np.testing.assert_allclose(Q, cv_process_noise(dt, profile.q), rtol=0, atol=1e-12)
+    # and the filter's own element-wise prediction from P = 0
+    kf = CvKalman(profile.q)
+    kf.predict(dt)
+    np.testing.assert_allclose(Q, kf.P_array(), rtol=0, atol=1e-12)
+    F = np.asarray(model.matrix(time_interval=timedelta(seconds=dt)))[np.ix_(idx, idx)]
+    np.testing.assert_array_equal(
+        F, np.block([[np.eye(3), dt * np.eye(3)], [np.zeros((3, 3)), np.eye(3)]])
+    )
+
+
+def test_gate_is_the_nis_gate(mb: ModuleType, profile: Profile, site: Site) -> None:
+    from scipy.stats import chi2
+
+    b = mb.build_baseline(profile, site)
+    hyps = b.tracker.data_associator.hypothesiser.hypothesisers
+    for dim in (2, 3):
+        g = hyps[dim].missed_distance
+        assert g**2 == pytest.approx(chi2.ppf(profile.nis_probability, dim), rel=1e-12)
+
+
+def test_detections_carry_our_r_and_the_same_drops(
+    mb: ModuleType, profile: Profile, site: Site
+) -> None:
+    b = mb.build_baseline(profile, site)
+    r0 = np.array(site.radar.enu, dtype=float)
+    p = r0 + np.array([300.0, 400.0, 80.0])
+    far = r0 + np.array([2000.0, 0.0, 50.0])
+    mk = lambda tid, q, v: RadarTrack(  # noqa: E731
+        10.0, tid, 0.0, 0.0, 0.0, *map(float, q), v, 0.8, None, -10.0
+    )
+    dets = b.radar_detections(RadarFrame(10.0, (mk(1, p, (1.0, 2.0, 0.0)), mk(2, far, None))))
+    (d,) = dets  # beyond the range gate: dropped
+    np.testing.assert_array_equal(np.asarray(d.state_vector).ravel(), p)
+    expected = packed_to_array(radar_model_from_profile(profile, site).r_at(*p))
+    np.testing.assert_allclose(np.asarray(d.measurement_model.covar()), expected, rtol=0, atol=0)
+    H = np.asarray(d.measurement_model.matrix())[:, mb.SS_TO_OURS]
+    np.testing.assert_array_equal(H, np.hstack([np.eye(3), np.zeros((3, 3))]))
+    # the same report again (velocity and RCS repeated): a coast, dropped
+    assert profile.score.skip_radar_coasts
+    assert not b.radar_detections(RadarFrame(10.5, (mk(1, p, (1.0, 2.0, 0.0)),)))
+    assert b.dropped == {"range_gate": 1, "coast": 1}
+    # RF: R from the CEP model; a CEP above max_cep_m dropped
+    att = RfAttempt(11.0, 1, True, 0.0, 0.0, 5.0, 6.0, 9.0, 4, 4)
+    rd = b.rf_detection(att)
+    expected2 = packed_to_array(rf_model_from_profile(profile).r_for(9.0, 4))
+    np.testing.assert_allclose(np.asarray(rd.measurement_model.covar()), expected2, atol=0)
+    assert profile.rf_max_cep_m is not None
+    bad = RfAttempt(12.0, 2, True, 0.0, 0.0, 5.0, 6.0, profile.rf_max_cep_m + 1.0, 4, 4)
+    assert b.rf_detection(bad) is None
+    # the variant that also drops reports the radar itself classes below a probability
+    bc = mb.build_baseline(profile, site, 0.5)
+    low = RadarTrack(10.0, 3, 0.0, 0.0, 0.0, *map(float, p), None, 0.3, None, -10.0)
+    unknown = RadarTrack(10.0, 4, 0.0, 0.0, 0.0, *map(float, p), None, None, None, -10.0)
+    high = RadarTrack(10.0, 5, 0.0, 0.0, 0.0, *map(float, p), None, 0.5, None, -10.0)
+    kept = bc.radar_detections(RadarFrame(10.0, (low, unknown, high)))
+    assert [d.metadata["radar_track"] for d in kept] == [5] and bc.dropped == {"class": 2}
+
+
+def test_two_crossing_uavs_get_two_confirmed_tracks(
+    mb: ModuleType, profile: Profile, site: Site
+) -> None:
+    sc = Crossing(site, seed=1)
+    b = mb.build_baseline(profile, site)
+    epochs = mb.run_baseline_stream(b, sc.stream(), 1.0, 1000.0, 1099.0)
+    assert len(epochs) == 100
+    clutter = sc.r0 + np.array([100.0, 250.0, 30.0])
+    ids: list[set[int]] = [set(), set(), set()]  # per object: UAV A, UAV B, clutter
+    for ep in epochs[5:]:  # confirmed from the third frame on (M of N, 4 frames a second)
+        objects = (sc.a(ep.t - 1000.0), sc.b(ep.t - 1000.0), clutter)
+        dist = np.array([[np.linalg.norm(o.x[:3] - q) for o in ep.tracks] for q in objects])
+        # every track is on one of the three objects
+        assert dist.shape[1] > 0 and np.all(dist.min(axis=0) < 30.0)
+        # each UAV's nearest track is within 30 m at every epoch, through the crossing (t = 50 s)
+        for k in range(3):
+            j = int(np.argmin(dist[k]))
+            assert k == 2 or dist[k, j] < 30.0
+            if dist[k, j] < 30.0:
+                ids[k].add(ep.tracks[j].track_id)
+        for o in ep.tracks:
+            assert o.t == ep.t and o.x.shape == (6,) and o.P.shape == (6, 6)
+            assert o.uav_prob == 1.0 and o.emitter is None
+    # each UAV keeps one id, different from the other's; the baseline has no classifier, so
+    # the clutter reflector has its track too
+    assert len(ids[0]) == 1 and len(ids[1]) == 1 and ids[0] != ids[1]
+    assert len(ids[2]) == 1 and not ids[2] & (ids[0] | ids[1])
+
+
+def test_holding_deleter_is_our_m_of_n(mb: ModuleType) -> None:
+    """The initiator confirms at m updates, then asks the deleter: together they decide as
+    our MofN does, for every hit pattern (the starting detection a hit)."""
+    import itertools
+    from datetime import datetime
+
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.hypothesis import SingleHypothesis
+    from stonesoup.types.prediction import GaussianStatePrediction
+    from stonesoup.types.track import Track
+    from stonesoup.types.update import GaussianStateUpdate
+
+    from uav_fusion.core.estimator.components import MofN
+
+    t0 = datetime(2026, 1, 1)
+    x, P = np.zeros((6, 1)), np.eye(6)
+
+    def state(k: int, hit: bool) -> GaussianStateUpdate | GaussianStatePrediction:
+        ts = t0 + timedelta(seconds=k)
+        if hit:
+            det = Detection(np.zeros((3, 1)), timestamp=ts)
+            return GaussianStateUpdate(x, P, SingleHypothesis(None, det), timestamp=ts)
+        return GaussianStatePrediction(x, P, timestamp=ts)
+
+    for m, n in ((1, 1), (2, 3), (3, 5), (3, 3)):
+        deleter = mb.MofNDeleter(m=m, n=n)
+        for pattern in itertools.product((True, False), repeat=n):
+            ours = MofN(m, n)
+            ours_state = "confirmed" if m == 1 else "pending"
+            track = Track([state(0, True)])
+            ss_state = "confirmed" if m == 1 else "pending"
+            for k, hit in enumerate(pattern, start=1):
+                if ours_state == "pending":
+                    ours_state = ours.record(hit)
+                if ss_state == "pending":
+                    track.append(state(k, hit))
+                    if sum(isinstance(s, GaussianStateUpdate) for s in track) >= m:
+                        ss_state = "confirmed"
+                    elif deleter.check_for_deletion(track):
+                        ss_state = "failed"
+            assert ss_state == ours_state, (m, n, pattern)
+
+
+def test_jpda_variant_tracks_both_uavs(mb: ModuleType, profile: Profile, site: Site) -> None:
+    sc = Crossing(site, seed=1)
+    b = mb.build_baseline(profile, site, None, mb.JpdaSettings(prob_detect=0.9, max_detections=2))
+    epochs = mb.run_baseline_stream(b, sc.stream(), 1.0, 1000.0, 1099.0)
+    clutter = sc.r0 + np.array([100.0, 250.0, 30.0])
+    for ep in epochs[5:]:
+        objects = (sc.a(ep.t - 1000.0), sc.b(ep.t - 1000.0), clutter)
+        dist = np.array([[np.linalg.norm(o.x[:3] - q) for o in ep.tracks] for q in objects])
+        # one track per object (no duplicates), each UAV with a track within 50 m; JPDA's
+        # shared detections may swap two ids where a UAV passes the reflector (t = 37 s)
+        assert len(ep.tracks) == 3
+        assert dist[0].min() < 50.0 and dist[1].min() < 50.0
