@@ -97,24 +97,32 @@ def cached_flights(
     return out
 
 
-def uav_report_times(twin: TwinFlight) -> list[float]:
-    """Times (the flight's radar timeline) of the radar reports of tracks on the UAV."""
+def uav_report_times(twin: TwinFlight, index: int = 0) -> list[float]:
+    """Times (the flight's radar timeline) of the radar reports of tracks on one UAV.
+
+    ``index`` is the UAV's place among the flight's vehicles (0: the first UAV).
+    """
     offset = twin.site.clock_offset_s("radar")
+    oid = radar_model.uav_object_id(index)
     return [
         f.t_unix - offset
         for f in twin.radar
-        if any(tr.report.kind == radar_model.UAV for tr in f.tracks)
+        if any(tr.report.kind == radar_model.UAV and tr.report.object_id == oid for tr in f.tracks)
     ]
 
 
 def write_labels(twin: TwinFlight, folder: Path, flight: BenchFlight, key: str) -> Path:
-    doc = {
+    doc: dict[str, object] = {
         "flight": flight.flight_id,
         "plan": flight.plan.name,
         "seed": flight.seed,
         "key": key,
         "uav_radar_report_times": uav_report_times(twin),
     }
+    if twin.others:
+        doc["vehicle_radar_report_times"] = {
+            name: uav_report_times(twin, i) for i, (name, _) in enumerate(twin.vehicles)
+        }
     path = folder / LABELS_FILE
     path.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     return path
@@ -133,9 +141,24 @@ def read_labels(folder: Path) -> FloatArray:
         raise DataError(path, None, f"unreadable benchmark labels: {exc}") from None
 
 
-def generate_flight(
-    cf: CachedFlight, definition: BenchDefinition, site: Site
-) -> tuple[Path, bool]:
+def read_vehicle_labels(folder: Path) -> dict[str, FloatArray]:
+    """Every UAV's radar report times of a cached flight, by vehicle (the first UAV first)."""
+    path = folder / LABELS_FILE
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        per = doc.get("vehicle_radar_report_times")
+        if per is None:
+            per = {"uav1": doc["uav_radar_report_times"]}
+        if not isinstance(per, dict):
+            raise TypeError("vehicle_radar_report_times is not a mapping")
+        return {str(k): np.asarray(v, dtype=float).reshape(-1) for k, v in per.items()}
+    except FileNotFoundError:
+        raise DataError(path, None, "benchmark labels not found") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise DataError(path, None, f"unreadable benchmark labels: {exc}") from None
+
+
+def generate_flight(cf: CachedFlight, definition: BenchDefinition, site: Site) -> tuple[Path, bool]:
     """Make sure ``cf`` is in the cache; returns (folder, generated now)."""
     if cf.exists():
         return cf.folder, False

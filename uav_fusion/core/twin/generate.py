@@ -19,10 +19,10 @@ import numpy.typing as npt
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import RadarSite, Site
-from uav_fusion.core.twin.config import TwinConfig
+from uav_fusion.core.twin.config import RfModel, TwinConfig
 from uav_fusion.core.twin.radar_model import SimRadarFrame, SimTrackReport, simulate_radar
 from uav_fusion.core.twin.rf_model import SimRfAttempt, simulate_rf
-from uav_fusion.core.twin.trajectory import FlightPlan, Trajectory, fly
+from uav_fusion.core.twin.trajectory import Emitter, FlightPlan, Trajectory, fly
 from uav_fusion.core.twin.writers import radar_line_layout
 
 FloatArray = npt.NDArray[np.float64]
@@ -75,6 +75,16 @@ class RfAttemptOut:
 
 
 @dataclass(frozen=True)
+class OtherUav:
+    """Another UAV of a multi-UAV flight: its plan, its flight and its truth log."""
+
+    vehicle: str
+    plan: FlightPlan
+    traj: Trajectory
+    truth: TruthLog
+
+
+@dataclass(frozen=True)
 class TwinFlight:
     site: Site  # with the radar and RF sensor set actually used
     config: TwinConfig
@@ -87,10 +97,16 @@ class TwinFlight:
     rf: tuple[RfAttemptOut, ...]
     radar_sim: tuple[SimRadarFrame, ...]
     scene_scale: float = 1.0  # the radar scene's rate multiplier used
+    others: tuple[OtherUav, ...] = ()  # the other UAVs of a multi-UAV flight
 
     @property
     def start_datetime(self) -> datetime:
         return datetime.fromtimestamp(self.start_unix, tz=UTC)
+
+    @property
+    def vehicles(self) -> list[tuple[str, TruthLog]]:
+        """(vehicle, truth log) of every UAV, the first one first."""
+        return [(self.plan.vehicle, self.truth), *((o.vehicle, o.truth) for o in self.others)]
 
 
 def parse_utc(text: str, where: str = "recording.start_utc") -> float:
@@ -265,15 +281,36 @@ def generate_twin(
     start_unix = parse_utc(config.recording.start_utc)
     root = np.random.SeedSequence(seed)
     s_traj, s_truth, s_radar, s_rf, s_outage = root.spawn(5)
-    traj = fly(
-        plan,
-        used_site,
-        config.dynamics,
-        np.random.default_rng(s_traj),
-        config.recording.tail_s,
-        duration_s,
-    )
-    truth = _truth_log(traj, used_site, config, np.random.default_rng(s_truth), start_unix)
+    # the other UAVs draw from streams of their own: the first UAV's flight and the scene are
+    # those of the same seed without them
+    s_others = [ss.spawn(5) for ss in root.spawn(len(plan.others))]
+    plans = plan.all_vehicles
+    streams = [(s_traj, s_truth, s_radar, s_rf, s_outage), *s_others]
+
+    def fly_all(length: float | None) -> list[Trajectory]:
+        return [
+            fly(
+                p,
+                used_site,
+                config.dynamics,
+                np.random.default_rng(ss[0]),
+                config.recording.tail_s,
+                length,
+            )
+            for p, ss in zip(plans, streams, strict=True)
+        ]
+
+    trajs = fly_all(duration_s)
+    if duration_s is None and len(trajs) > 1:
+        # every log covers the whole recording: the shorter flights wait on their pads
+        longest = max(tr.duration for tr in trajs)
+        trajs = fly_all(longest)
+    traj = trajs[0]
+    truths = [
+        _truth_log(tr, used_site, config, np.random.default_rng(ss[1]), start_unix)
+        for tr, ss in zip(trajs, streams, strict=True)
+    ]
+    truth = truths[0]
     scale = plan.scene_scale if scene_scale is None else scene_scale
     if not 0.0 <= scale <= 10.0:
         raise ConfigError(f"scene scale must lie in [0, 10], got {scale}")
@@ -288,15 +325,25 @@ def generate_twin(
         ghosts=config.ghosts,
         classifier=config.classifier,
         scene_scale=scale,
+        others=[
+            (tr, np.random.default_rng(ss[2]))
+            for tr, ss in zip(trajs[1:], streams[1:], strict=True)
+        ],
     )
-    attempts = simulate_rf(
-        traj,
-        used_site,
-        config.rf,
-        np.random.default_rng(s_rf),
-        outage=config.rf_outage,
-        outage_rng=np.random.default_rng(s_outage),
-    )
+    per_emitter = [
+        simulate_rf(
+            tr,
+            used_site,
+            _link(config.rf, p.emitter),
+            np.random.default_rng(ss[3]),
+            outage=config.rf_outage,
+            outage_rng=np.random.default_rng(ss[4]),
+            vehicle=p.vehicle,
+        )
+        for p, tr, ss in zip(plans, trajs, streams, strict=True)
+        if p.emitter is not None
+    ]
+    attempts = _merge_attempts(per_emitter)
     return TwinFlight(
         site=used_site,
         config=config,
@@ -309,7 +356,36 @@ def generate_twin(
         rf=_rf_out(attempts, used_site, config, start_unix),
         radar_sim=tuple(frames),
         scene_scale=scale,
+        others=tuple(
+            OtherUav(p.vehicle, p, tr, tl)
+            for p, tr, tl in zip(plans[1:], trajs[1:], truths[1:], strict=True)
+        ),
     )
+
+
+def _link(rf: RfModel, emitter: Emitter | None) -> RfModel:
+    """The twin's RF settings for one emitter's link."""
+    if emitter is None:
+        return rf
+    out = rf
+    if emitter.center_frequency_hz is not None:
+        out = dataclasses.replace(out, center_frequency_hz=emitter.center_frequency_hz)
+    if emitter.interval_s is not None:
+        jitter = min(rf.interval_jitter_s, 0.5 * emitter.interval_s)
+        out = dataclasses.replace(out, interval_s=emitter.interval_s, interval_jitter_s=jitter)
+    return out
+
+
+def _merge_attempts(per_emitter: list[list[SimRfAttempt]]) -> list[SimRfAttempt]:
+    """Every emitter's attempts in one log, by time, numbered in order from the first id.
+
+    One emitter's attempts are kept as they are (a single-UAV flight is unchanged).
+    """
+    if len(per_emitter) <= 1:
+        return per_emitter[0] if per_emitter else []
+    merged = sorted((a for lst in per_emitter for a in lst), key=lambda a: a.t)
+    first = min((lst[0].meas_id for lst in per_emitter if lst), default=1000)
+    return [dataclasses.replace(a, meas_id=first + i) for i, a in enumerate(merged)]
 
 
 def twin_to_flight(twin: TwinFlight, rf_height: float | None = None) -> Flight:
@@ -319,32 +395,8 @@ def twin_to_flight(twin: TwinFlight, rf_height: float | None = None) -> Flight:
     ``rf_height`` (default the site origin's height), the filter only uses their east/north.
     """
     site = twin.site
-    tl = twin.truth
-    ok = tl.valid
-    t = tl.t_us[ok] / 1e6
-    h = site.takeoff_h + tl.alt[ok]
-    e, n, u = site.to_enu(tl.lat[ok], tl.lon[ok], h)
-    lines = np.flatnonzero(ok) + 1
-    truth = [
-        TruthFix(
-            t=float(t[i]),
-            lat=float(tl.lat[ok][i]),
-            lon=float(tl.lon[ok][i]),
-            h=float(h[i]),
-            e=float(e[i]),
-            n=float(n[i]),
-            u=float(u[i]),
-            vel_ned=(
-                float(tl.vel_ned[ok][i, 0]),
-                float(tl.vel_ned[ok][i, 1]),
-                float(tl.vel_ned[ok][i, 2]),
-            ),
-            fix_type=int(tl.fix_type[ok][i]),
-            num_sats=int(tl.num_sats[ok][i]),
-            line=int(lines[i]),
-        )
-        for i in range(t.size)
-    ]
+    vehicles = {name: _truth_fixes(tl, site) for name, tl in twin.vehicles}
+    truth = vehicles[twin.plan.vehicle]
     all_tracks = [tr for f in twin.radar for tr in f.tracks]
     if all_tracks:
         re_, rn_, ru_ = site.to_enu(
@@ -407,6 +459,40 @@ def twin_to_flight(twin: TwinFlight, rf_height: float | None = None) -> Flight:
                 valid_sensors=a.attempt.valid_sensors,
                 total_sensors=a.attempt.total_sensors,
                 line=line,
+                center_freq_hz=float(
+                    f"{a.attempt.center_frequency_hz or twin.config.rf.center_frequency_hz:.0f}"
+                ),
+                rho=float(f"{a.attempt.rho:.4f}") if a.attempt.ok else 0.0,
             )
         )
-    return Flight(name=twin.plan.name, truth=truth, radar=radar, rf=rf)
+    return Flight(name=twin.plan.name, truth=truth, radar=radar, rf=rf, vehicles=vehicles)
+
+
+def _truth_fixes(tl: TruthLog, site: Site) -> list[TruthFix]:
+    """The valid rows of a truth log as the truth reader returns them."""
+    ok = tl.valid
+    t = tl.t_us[ok] / 1e6
+    h = site.takeoff_h + tl.alt[ok]
+    e, n, u = site.to_enu(tl.lat[ok], tl.lon[ok], h)
+    lines = np.flatnonzero(ok) + 1
+    truth = [
+        TruthFix(
+            t=float(t[i]),
+            lat=float(tl.lat[ok][i]),
+            lon=float(tl.lon[ok][i]),
+            h=float(h[i]),
+            e=float(e[i]),
+            n=float(n[i]),
+            u=float(u[i]),
+            vel_ned=(
+                float(tl.vel_ned[ok][i, 0]),
+                float(tl.vel_ned[ok][i, 1]),
+                float(tl.vel_ned[ok][i, 2]),
+            ),
+            fix_type=int(tl.fix_type[ok][i]),
+            num_sats=int(tl.num_sats[ok][i]),
+            line=int(lines[i]),
+        )
+        for i in range(t.size)
+    ]
+    return truth

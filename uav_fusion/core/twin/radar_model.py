@@ -30,11 +30,17 @@ Every object in the scene goes through the same chain, scan by scan (``scan_inte
 ``SimTrackReport.kind`` is the kind of the object the track currently follows (its last
 associated detection's object): UAV, GHOST, BIRD, CLUTTER or VEHICLE. The file does not carry
 it; the benchmark uses ``kind == UAV`` to know when the UAV is observable by the radar.
+
+A multi-UAV flight passes the other UAVs' trajectories as ``others``: each is an object of kind
+UAV with its own ghost, drawing from its own random stream (so the first UAV's and the scene's
+draws are those of the same flight without them). ``SimTrackReport.object_id`` tells the UAVs
+apart: :func:`uav_object_id` of the UAV's index (0 for the first).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -507,6 +513,35 @@ class _Tracker:
             self.meta = [self.meta[i] for i in keep]
 
 
+def uav_object_id(index: int) -> int:
+    """``object_id`` of the UAV at ``index`` of the flight's vehicles (0: the first UAV)."""
+    return 0 if index == 0 else -index
+
+
+def ghost_object_id(index: int) -> int:
+    """``object_id`` of that UAV's multipath ghost."""
+    return 1 if index == 0 else -(100 + index)
+
+
+def _ghost(
+    uav: _Obj, ghost: _Obj, rpos: FloatArray, ground_u: float, cfg: RadarModel, gm: GhostModel
+) -> bool:
+    """Place ``ghost`` as ``uav``'s mirror image in the ground; False when it is not seen."""
+    u_el = _polar(uav.pos - rpos)[2]
+    g_pos = np.array([uav.pos[0], uav.pos[1], 2.0 * ground_u - uav.pos[2]])
+    g_el = _polar(g_pos - rpos)[2]
+    if uav.pos[2] - ground_u > 1.0 and u_el - g_el >= gm.min_separation_deg:
+        graze = math.radians(abs(g_el))
+        x = 2.0 * math.pi * gm.surface_roughness_m * math.sin(graze) / gm.wavelength_m
+        loss = gm.fresnel_loss_db + 20.0 * math.log10(math.e) * 2.0 * x * x
+        if loss < 40.0:
+            ghost.pos = g_pos
+            ghost.vel = np.array([uav.vel[0], uav.vel[1], -uav.vel[2]])
+            ghost.rcs_median_m2 = cfg.rcs_median_m2 * 10.0 ** (-loss / 10.0)
+            return True
+    return False
+
+
 def _sigmoid(x: float) -> float:
     return 1.0 / (1.0 + math.exp(-x))
 
@@ -522,11 +557,13 @@ def simulate_radar(
     ghosts: GhostModel | None = None,
     classifier: ClassifierModel | None = None,
     scene_scale: float = 1.0,
+    others: Sequence[tuple[Trajectory, np.random.Generator]] = (),
 ) -> list[SimRadarFrame]:
     """Radar frames over the whole recording: every object through detection and tracker.
 
     ``scene_scale`` multiplies the rates of clutter sites, vehicles and bird flocks (0: the UAV
-    and its ghost only).
+    and its ghost only). ``others``: the other UAVs of the flight, each with its own random
+    generator for its detections.
     """
     clutter = clutter or ClutterModel()
     vehicles = vehicles or VehicleModel()
@@ -540,8 +577,35 @@ def simulate_radar(
     scene = _Scene(radar, rpos, ground_u, clutter, vehicles, birds, cls, r_scene, scene_scale)
     tracker = _Tracker(cfg, rpos, cls.initial_logit)
     next_id = int(r_misc.integers(100, 900))
-    uav = _Obj(0, UAV, np.zeros(3), np.zeros(3), cls.uav_logit, cfg.rcs_median_m2, cfg.rcs_sigma_ln)
-    ghost = _Obj(1, GHOST, np.zeros(3), np.zeros(3), cls.ghost_logit, 0.0, cfg.rcs_sigma_ln)
+    uavs = [
+        _Obj(
+            uav_object_id(i),
+            UAV,
+            np.zeros(3),
+            np.zeros(3),
+            cls.uav_logit,
+            cfg.rcs_median_m2,
+            cfg.rcs_sigma_ln,
+        )
+        for i in range(1 + len(others))
+    ]
+    ghosts_ = [
+        _Obj(
+            ghost_object_id(i),
+            GHOST,
+            np.zeros(3),
+            np.zeros(3),
+            cls.ghost_logit,
+            0.0,
+            cfg.rcs_sigma_ln,
+        )
+        for i in range(1 + len(others))
+    ]
+    # whose random stream draws an object's detections: the first UAV's, another UAV's (for
+    # it and its ghost), or the scene's
+    own_rng = {uav_object_id(i + 1): r for i, (_, r) in enumerate(others)}
+    own_rng.update({ghost_object_id(i + 1): r for i, (_, r) in enumerate(others)})
+    own_rng[uav_object_id(0)] = r_uav
     frames: list[SimRadarFrame] = []
     n_scans = int(traj.duration / cfg.scan_interval_s)
     t_first = float(r_misc.uniform(0.0, cfg.scan_interval_s))
@@ -555,32 +619,24 @@ def simulate_radar(
     times = t_first + dt_scan * np.arange(n_scans) + r_misc.normal(0.0, cfg.scan_jitter_s, n_scans)
     ok_t = (times >= 0) & (times <= traj.duration)
     times = times[ok_t]
-    upos = traj.position(times)
-    uvel = traj.velocity(times)
+    paths = [(traj.position(times), traj.velocity(times))]
+    paths += [(tr.position(times), tr.velocity(times)) for tr, _ in others]
     for k, t in enumerate(times):
         t = float(t)
         scene.step(t, dt_scan)
-        uav.pos, uav.vel = upos[k], uvel[k]
-        objs: list[_Obj] = [uav]
-        # the ghost: the UAV mirrored in the ground plane
-        u_el = _polar(uav.pos - rpos)[2]
-        g_pos = np.array([uav.pos[0], uav.pos[1], 2.0 * ground_u - uav.pos[2]])
-        g_el = _polar(g_pos - rpos)[2]
-        if uav.pos[2] - ground_u > 1.0 and u_el - g_el >= ghosts.min_separation_deg:
-            graze = math.radians(abs(g_el))
-            x = 2.0 * math.pi * ghosts.surface_roughness_m * math.sin(graze) / ghosts.wavelength_m
-            loss = ghosts.fresnel_loss_db + 20.0 * math.log10(math.e) * 2.0 * x * x
-            if loss < 40.0:
-                ghost.pos = g_pos
-                ghost.vel = np.array([uav.vel[0], uav.vel[1], -uav.vel[2]])
-                ghost.rcs_median_m2 = cfg.rcs_median_m2 * 10.0 ** (-loss / 10.0)
+        objs: list[_Obj] = []
+        for uav, ghost, (upos, uvel) in zip(uavs, ghosts_, paths, strict=True):
+            uav.pos, uav.vel = upos[k], uvel[k]
+            objs.append(uav)
+            # the ghost: the UAV mirrored in the ground plane
+            if _ghost(uav, ghost, rpos, ground_u, cfg, ghosts):
                 objs.append(ghost)
         objs.extend(scene.objects)
 
         dets: list[_Det] = []
         for ob in objs:
-            # the UAV's own draws do not depend on how many other objects the scene holds
-            r_det = r_uav if ob.kind == UAV else r_obj
+            # a UAV's own draws do not depend on how many other objects the scene holds
+            r_det = own_rng.get(ob.oid, r_obj)
             if ob.oid not in known:
                 known.add(ob.oid)
                 ob.glint_az = float(r_det.normal(0.0, cfg.glint_sigma_deg))

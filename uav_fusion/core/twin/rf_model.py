@@ -50,6 +50,8 @@ class SimRfAttempt:
     nlos_links: int  # twin diagnostics (not written) ...
     residual_m: float  # ... RMS TDOA residual of the solution (NaN without one)
     reason: str  # "" or why it failed
+    center_frequency_hz: float = 0.0  # the emitter's link (0: the twin configuration's)
+    vehicle: str = "uav1"  # twin diagnostics: whose emission (not written)
 
 
 def grid_start(
@@ -140,6 +142,7 @@ def simulate_rf(
     rng: np.random.Generator,
     outage: RfOutage | None = None,
     outage_rng: np.random.Generator | None = None,
+    vehicle: str = "uav1",
 ) -> list[SimRfAttempt]:
     """Every localisation attempt of the recording.
 
@@ -241,6 +244,8 @@ def simulate_rf(
                 n_nlos,
                 rms,
                 reason,
+                cfg.center_frequency_hz,
+                vehicle,
             )
         )
         meas_id += 1

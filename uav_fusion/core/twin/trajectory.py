@@ -8,11 +8,22 @@ point-mass model: a velocity command towards the active waypoint (capped by the 
 slowed so that it can take the next corner, and braked before the last one), tracked by a
 first-order velocity loop with acceleration limits, plus correlated wind gusts. A waypoint
 with ``alt`` 0 as the last one is a landing.
+
+A multi-UAV plan lists its vehicles under ``vehicles``: each entry is a plan of its own (its
+``waypoints``, ``speed_mps``, ``hold_before_s``) plus ``name`` (``uav1`` first; the others name
+their truth files, ``<stamp>_<name>_vehicleOut.txt``), an optional ``pad`` (``e``/``n`` or
+``lat``/``lon``: where it takes off and sits before and after its flight; default the site's
+take-off point) and an optional ``rf`` (``silent: true`` for a UAV without a control link, or
+its link's ``center_frequency_mhz`` and ``interval_s``; default the twin configuration's link).
+The top level keeps ``name`` and ``scene_scale``. The first vehicle is returned as the plan,
+the others in its ``others``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,12 +50,35 @@ class Waypoint:
 
 
 @dataclass(frozen=True)
+class Emitter:
+    """A UAV's control link: its centre frequency and the sensors' attempt interval.
+
+    ``None`` fields take the twin configuration's ``rf`` values.
+    """
+
+    center_frequency_hz: float | None = None
+    interval_s: float | None = None
+
+
+DEFAULT_EMITTER = Emitter()
+
+
+@dataclass(frozen=True)
 class FlightPlan:
     name: str
     waypoints: tuple[Waypoint, ...]
     hold_before_s: float
     source: Path | None = None
     scene_scale: float = 1.0  # multiplies the radar scene's clutter, vehicle and bird rates
+    vehicle: str = "uav1"  # the truth file's vehicle name
+    pad: tuple[float, float] | None = None  # take-off point (ENU e, n); None: the site's
+    emitter: Emitter | None = DEFAULT_EMITTER  # the control link the RF sensors hear; None: silent
+    others: tuple[FlightPlan, ...] = ()  # the other UAVs of a multi-UAV plan
+
+    @property
+    def all_vehicles(self) -> tuple[FlightPlan, ...]:
+        """Every UAV of the plan, the first one first."""
+        return (self, *self.others)
 
 
 def _num(d: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
@@ -71,11 +105,120 @@ def _short(v: Any) -> str:
     return text if len(text) <= 40 else f"{text[:20]}… ({len(text)} characters)"
 
 
+VEHICLE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9-]*$")
+
+
+def _enu_point(w: dict[str, Any], site: Site, where: str) -> tuple[float, float]:
+    has_enu = "e" in w or "n" in w
+    has_geo = "lat" in w or "lon" in w
+    if has_enu == has_geo:
+        raise ConfigError(f"{where}: give either e/n (ENU metres) or lat/lon (degrees)")
+    if has_enu:
+        e, n = _num(w, "e", where), _num(w, "n", where)
+    else:
+        lat, lon = _num(w, "lat", where), _num(w, "lon", where)
+        if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+            raise ConfigError(f"{where}: lat/lon out of range")
+        ee, nn, _ = site.to_enu(lat, lon, site.takeoff_h)
+        e, n = float(ee), float(nn)
+    if math.hypot(e, n) > 20000.0:
+        raise ConfigError(f"{where}: more than 20 km from the site origin")
+    return e, n
+
+
+def _emitter(raw: Any, where: str) -> Emitter | None:
+    if raw is None:
+        return DEFAULT_EMITTER
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: expected a mapping (silent, center_frequency_mhz, interval_s)")
+    unknown = set(raw) - {"silent", "center_frequency_mhz", "interval_s"}
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+    silent = raw.get("silent", False)
+    if not isinstance(silent, bool):
+        raise ConfigError(f"{where}: 'silent' must be true or false, got {_short(silent)}")
+    if silent:
+        if len(raw) > 1:
+            raise ConfigError(f"{where}: a silent UAV has no link settings")
+        return None
+    freq = interval = None
+    if "center_frequency_mhz" in raw:
+        mhz = _num(raw, "center_frequency_mhz", where)
+        if not 30.0 <= mhz <= 10000.0:
+            raise ConfigError(f"{where}: center_frequency_mhz must lie in [30, 10000], got {mhz}")
+        freq = mhz * 1e6
+    if "interval_s" in raw:
+        interval = _num(raw, "interval_s", where)
+        if not 0.5 <= interval <= 60.0:
+            raise ConfigError(f"{where}: interval_s must lie in [0.5, 60], got {interval}")
+    return Emitter(freq, interval)
+
+
 def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> FlightPlan:
     """Validate a parsed flight-plan document and convert its waypoints to ENU."""
     src = str(source) if source else "<flight plan>"
     if not isinstance(doc, dict):
         raise ConfigError(f"{src}: expected a mapping at top level")
+    if "vehicles" in doc:
+        return _multi_plan(doc, site, source, src)
+    return _single_plan(doc, site, source, src)
+
+
+def _multi_plan(doc: dict[str, Any], site: Site, source: Path | None, src: str) -> FlightPlan:
+    unknown = set(doc) - {"name", "scene_scale", "vehicles"}
+    if unknown:
+        raise ConfigError(
+            f"{src}: unknown top-level key(s) {', '.join(sorted(unknown))} in a multi-UAV plan "
+            "(name, scene_scale, vehicles; each vehicle holds its own waypoints)"
+        )
+    raw = doc["vehicles"]
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"{src}: 'vehicles' must be a non-empty list")
+    if len(raw) > 8:
+        raise ConfigError(f"{src}: at most 8 vehicles, got {len(raw)}")
+    name = str(doc.get("name", source.stem if source else "flight"))
+    scene = _num(doc, "scene_scale", src, 1.0)
+    if not 0.0 <= scene <= 10.0:
+        raise ConfigError(f"{src}: scene_scale must lie in [0, 10], got {scene}")
+    plans: list[FlightPlan] = []
+    seen: set[str] = set()
+    for i, v in enumerate(raw, start=1):
+        where = f"{src}: vehicle {i}"
+        if not isinstance(v, dict):
+            raise ConfigError(f"{where}: expected a mapping")
+        vname = v.get("name")
+        if not isinstance(vname, str) or VEHICLE_NAME.match(vname) is None:
+            raise ConfigError(
+                f"{where}: 'name' must be letters, digits and '-', got {_short(vname)}"
+            )
+        if (i == 1) != (vname == "uav1"):
+            raise ConfigError(f"{where}: the first vehicle, and only it, is named 'uav1'")
+        if vname.lower() in seen:
+            raise ConfigError(f"{where}: vehicle {vname!r} is listed twice")
+        seen.add(vname.lower())
+        where = f"{src}: vehicle {vname}"
+        pad_raw = v.get("pad")
+        pad = None
+        if pad_raw is not None:
+            if not isinstance(pad_raw, dict):
+                raise ConfigError(f"{where}: pad: expected a mapping (e/n or lat/lon)")
+            unknown = set(pad_raw) - {"e", "n", "lat", "lon"}
+            if unknown:
+                raise ConfigError(f"{where}: pad: unknown key(s) {', '.join(sorted(unknown))}")
+            pad = _enu_point(pad_raw, site, f"{where}: pad")
+        emitter = _emitter(v.get("rf"), f"{where}: rf")
+        body = {k: x for k, x in v.items() if k not in ("name", "pad", "rf")}
+        body["name"] = name
+        body["scene_scale"] = scene
+        p = _single_plan(body, site, source, where)
+        plans.append(dataclasses.replace(p, vehicle=vname, pad=pad, emitter=emitter))
+    return dataclasses.replace(plans[0], others=tuple(plans[1:]))
+
+
+def _single_plan(doc: dict[str, Any], site: Site, source: Path | None, src: str) -> FlightPlan:
+    unknown = set(doc) - {"name", "speed_mps", "hold_before_s", "waypoints", "scene_scale"}
+    if unknown:
+        raise ConfigError(f"{src}: unknown key(s) {', '.join(sorted(unknown))}")
     speed = _num(doc, "speed_mps", src, 10.0)
     if not 0.5 <= speed <= 30.0:
         raise ConfigError(f"{src}: speed_mps must lie in [0.5, 30], got {speed}")
@@ -93,20 +236,7 @@ def flight_plan_from_dict(doc: Any, site: Site, source: Path | None = None) -> F
         unknown = set(w) - {"e", "n", "lat", "lon", "alt", "speed", "hold_s", "note"}
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
-        has_enu = "e" in w or "n" in w
-        has_geo = "lat" in w or "lon" in w
-        if has_enu == has_geo:
-            raise ConfigError(f"{where}: give either e/n (ENU metres) or lat/lon (degrees)")
-        if has_enu:
-            e, n = _num(w, "e", where), _num(w, "n", where)
-        else:
-            lat, lon = _num(w, "lat", where), _num(w, "lon", where)
-            if not (-90 <= lat <= 90 and -180 <= lon <= 180):
-                raise ConfigError(f"{where}: lat/lon out of range")
-            ee, nn, _ = site.to_enu(lat, lon, site.takeoff_h)
-            e, n = float(ee), float(nn)
-        if math.hypot(e, n) > 20000.0:
-            raise ConfigError(f"{where}: more than 20 km from the site origin")
+        e, n = _enu_point(w, site, where)
         alt = _num(w, "alt", where)
         if not 0.0 <= alt <= 500.0:
             raise ConfigError(f"{where}: alt must lie in [0, 500] m, got {alt}")
@@ -188,7 +318,7 @@ def fly(
     """
     te, tn, tu = site.to_enu(site.takeoff_lat, site.takeoff_lon, site.takeoff_h)
     ground = float(tu)
-    p = [float(te), float(tn), ground]
+    p = [float(te), float(tn), ground] if plan.pad is None else [*plan.pad, ground]
     v = [0.0, 0.0, 0.0]
     gust = [0.0, 0.0]
     dt = dyn.dt_s

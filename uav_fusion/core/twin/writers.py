@@ -3,7 +3,8 @@
 - ``AADM.csv``: Keysight RF localisation attempts (UTC times, failed attempts as 0, 0);
 - ``radar_data_<YYYY-MM-DD_HH-MM-SS>.json``: Fortem radar JSON Lines (status lines and track
   frames, ``trackData`` at top level or inside ``params``);
-- ``<YYYY-MM-DD>_<HH-MM-SS>_vehicleOut.txt``: the vehicle's RTK log, no header, local time.
+- ``<YYYY-MM-DD>_<HH-MM-SS>_vehicleOut.txt``: the vehicle's RTK log, no header, local time;
+  in a multi-UAV flight the other UAVs' logs are ``<same stamp>_<vehicle>_vehicleOut.txt``.
 
 Coordinates and times that the loaders turn into ENU are written with ``repr`` precision, so
 reading the files back reproduces the twin's values exactly.
@@ -50,14 +51,22 @@ def _stamp(t_us: int, fmt_ms: bool = False) -> str:
 
 
 def file_names(twin: TwinFlight) -> dict[str, str]:
-    """Names of the three files of ``twin`` (radar in UTC, truth in the vehicle's local time)."""
+    """Names of the files of ``twin`` (radar in UTC, truth in the vehicle's local time).
+
+    ``truth`` is the first UAV's log; another UAV's is ``truth:<vehicle>``, named
+    ``<stamp>_<vehicle>_vehicleOut.txt`` with the same stamp.
+    """
     start = twin.start_datetime
     local = start + timedelta(seconds=twin.site.clock_offset_s("truth"))
-    return {
+    stamp = f"{local:%Y-%m-%d_%H-%M-%S}"
+    names = {
         "rf": RF_FILE,
         "radar": f"radar_data_{start:%Y-%m-%d_%H-%M-%S}.json",
-        "truth": f"{local:%Y-%m-%d_%H-%M-%S}_vehicleOut.txt",
+        "truth": f"{stamp}_vehicleOut.txt",
     }
+    for other in twin.others:
+        names[f"truth:{other.vehicle}"] = f"{stamp}_{other.vehicle}_vehicleOut.txt"
+    return names
 
 
 def radar_line_layout(twin: TwinFlight) -> list[int]:
@@ -93,7 +102,7 @@ def write_rf_csv(twin: TwinFlight, path: Path) -> None:
                 [
                     at.meas_id,
                     "TDOA",
-                    f"{rf.center_frequency_hz:.0f}",
+                    f"{at.center_frequency_hz or rf.center_frequency_hz:.0f}",
                     f"{rf.sample_rate_hz:.0f}",
                     rf.num_samples,
                     lat,
@@ -160,8 +169,9 @@ def _tuple(a: float, b: float, c: float) -> str:
     return f"({a!r},{b!r},{c!r})"
 
 
-def write_truth(twin: TwinFlight, path: Path) -> None:
-    tl = twin.truth
+def write_truth(twin: TwinFlight, path: Path, vehicle: str | None = None) -> None:
+    """One UAV's truth log (default: the first UAV's)."""
+    tl = dict(twin.vehicles)[vehicle] if vehicle is not None else twin.truth
     offset_us = round(twin.site.clock_offset_s("truth") * 1e6)
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n", quoting=csv.QUOTE_MINIMAL)
@@ -219,6 +229,18 @@ def write_manifest(twin: TwinFlight, path: Path, names: dict[str, str]) -> None:
             "boresight_az_deg": r.boresight_az_deg,
         },
         "rf_sensors": list(twin.site.rf_sensors),
+        "vehicles": [
+            {
+                "name": p.vehicle,
+                "pad_enu": list(p.pad) if p.pad is not None else None,
+                "center_frequency_hz": (
+                    None
+                    if p.emitter is None
+                    else p.emitter.center_frequency_hz or twin.config.rf.center_frequency_hz
+                ),
+            }
+            for p in twin.plan.all_vehicles
+        ],
         "files": names,
         "counts": counts,
     }
@@ -229,7 +251,7 @@ MANIFEST = "twin_manifest.json"
 
 
 def write_twin(twin: TwinFlight, out_dir: str | Path) -> dict[str, Path]:
-    """Write the three data files and the manifest into ``out_dir`` (created if needed)."""
+    """Write the data files and the manifest into ``out_dir`` (created if needed)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     names = file_names(twin)
@@ -237,6 +259,8 @@ def write_twin(twin: TwinFlight, out_dir: str | Path) -> dict[str, Path]:
     write_rf_csv(twin, paths["rf"])
     write_radar_jsonl(twin, paths["radar"])
     write_truth(twin, paths["truth"])
+    for other in twin.others:
+        write_truth(twin, paths[f"truth:{other.vehicle}"], other.vehicle)
     paths["manifest"] = out / MANIFEST
     write_manifest(twin, paths["manifest"], names)
     return paths
