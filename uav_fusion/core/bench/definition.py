@@ -18,9 +18,13 @@ Keys (unknown keys are errors naming the file and the key):
     twin parameter file (default ``config/twin_default.yaml``; relative to the definition);
 ``duration_s``
     optional recording length of every flight (cuts the flights; for quick checks);
+``targets``
+    ``single`` (default: one UAV, scored on its fixed-rate output) or ``multi`` (flights with
+    several UAVs, scored as a set of targets: GOSPA, per-UAV coverage, ID switches, false
+    tracks; see :mod:`uav_fusion.core.multiscore`);
 ``scoring``
-    ``grid_hz`` (10), ``airborne_min_m`` (5), ``fresh_age_s`` (1), ``gross_error_m`` (100),
-    ``observable_window_s`` (2), ``nees_probability`` (0.95).
+    ``grid_hz`` (10; 1 for ``multi``), ``airborne_min_m`` (5), ``fresh_age_s`` (1),
+    ``gross_error_m`` (100), ``observable_window_s`` (2), ``nees_probability`` (0.95).
 """
 
 from __future__ import annotations
@@ -40,7 +44,17 @@ DEFAULT_DEFINITION = "accuracy.yaml"
 DEFAULT_FLIGHT_PLAN = "lake_wheeler_default"
 DEFAULT_FLIGHT_SEED = 1
 
-_TOP_KEYS = ("name", "description", "plans", "splits", "twin_config", "duration_s", "scoring")
+_TOP_KEYS = (
+    "name",
+    "description",
+    "targets",
+    "plans",
+    "splits",
+    "twin_config",
+    "duration_s",
+    "scoring",
+)
+TARGETS = ("single", "multi")
 _SCORING_KEYS = (
     "grid_hz",
     "airborne_min_m",
@@ -81,6 +95,12 @@ class BenchDefinition:
     grid_hz: float
     settings: ScoreSettings
     source: Path
+    targets: str = "single"
+
+    @property
+    def multi(self) -> bool:
+        """Flights with several UAVs, scored as a set of targets."""
+        return self.targets == "multi"
 
     def flights(self, split: str) -> list[BenchFlight]:
         """The split's flights, plan by plan, seed by seed."""
@@ -150,6 +170,9 @@ def definition_from_dict(doc: Any, source: Path) -> BenchDefinition:
         if k not in _TOP_KEYS:
             raise ConfigError(f"{where}: unknown key {k!r} (allowed: {', '.join(_TOP_KEYS)})")
     base = source.parent
+    targets = doc.get("targets", "single")
+    if targets not in TARGETS:
+        raise ConfigError(f"{where}: targets must be one of {', '.join(TARGETS)}, got {targets!r}")
     raw_plans = doc.get("plans")
     if not isinstance(raw_plans, list) or not raw_plans:
         raise ConfigError(f"{where}: plans must be a non-empty list of flight plans")
@@ -223,9 +246,10 @@ def definition_from_dict(doc: Any, source: Path) -> BenchDefinition:
         splits=splits,
         twin_config=twin_config,
         duration_s=duration,
-        grid_hz=_number(sc, "grid_hz", sw, 10.0, True),
+        grid_hz=_number(sc, "grid_hz", sw, 1.0 if targets == "multi" else 10.0, True),
         settings=settings,
         source=source,
+        targets=str(targets),
     )
 
 
