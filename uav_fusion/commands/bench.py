@@ -3,17 +3,20 @@
 Generates the definition's flights into the cache (once), runs every listed profile over every
 flight of the split in parallel on a Dask cluster, scores each run's fixed-rate output, prints
 one table (a row per profile, the pooled figures) with provenance, and writes the per-flight
-CSV, the figure, the table in Markdown and a JSON summary.
+CSV, the figure, the table in Markdown and a JSON summary. A multi-UAV definition
+(``targets: multi``, e.g. ``--definition multi``) runs the multi-UAV tracker instead and
+scores every flight's tracks as a set (:mod:`uav_fusion.core.bench.multi`).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
 
-from uav_fusion.core.bench.cache import cached_flights
-from uav_fusion.core.bench.definition import SPLITS, load_definition
+from uav_fusion.core.bench.cache import CachedFlight, cached_flights
+from uav_fusion.core.bench.definition import SPLITS, BenchDefinition, load_definition
 from uav_fusion.core.bench.report import (
     CSV_FILE,
     FIGURE_FILE,
@@ -31,8 +34,8 @@ from uav_fusion.core.bench.report import (
 )
 from uav_fusion.core.bench.run import GenerateTask, ScoreTask, generate_task, score_task
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimator.profile import load_profile, profile_path
-from uav_fusion.core.site import load_site
+from uav_fusion.core.estimator.profile import Profile, load_profile, profile_path
+from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 
 HELP = "accuracy benchmark: profiles x generated flights (tune/test split), fixed-rate scores"
@@ -55,9 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--split", choices=SPLITS, default="test", help="which half to run (default: test)"
     )
-    parser.add_argument(
-        "--out", help="output folder (default: out/bench/<definition>-<split>)"
-    )
+    parser.add_argument("--out", help="output folder (default: out/bench/<definition>-<split>)")
     add_engine_arguments(parser)
     parser.add_argument("--no-figure", action="store_true", help="do not draw the figure")
 
@@ -109,12 +110,11 @@ def run(args: argparse.Namespace) -> int:
         f"{len(definition.splits[args.split])} seeds), profiles {', '.join(names)}"
     )
     print(
-        f"  cache {cache}: {len(flights) - len(missing)} flights cached, "
-        f"{len(missing)} to generate"
+        f"  cache {cache}: {len(flights) - len(missing)} flights cached, {len(missing)} to generate"
     )
-    engine = Engine(
-        workers=args.workers, scheduler=args.scheduler, processes=not args.threads
-    )
+    if definition.multi:
+        return _run_multi(args, definition, profiles, site, flights, missing, out, wall0)
+    engine = Engine(workers=args.workers, scheduler=args.scheduler, processes=not args.threads)
     with engine:
         engine_desc = engine.description
         print(f"  engine: {engine_desc}")
@@ -148,8 +148,10 @@ def run(args: argparse.Namespace) -> int:
         {"profiles": ", ".join(f"{p.name} ({p.source})" for p in profiles)},
     )
     print()
-    print(f"pooled over {len(flights)} {args.split} flights, {definition.grid_hz:g} Hz grid, "
-          f"airborne epochs (truth > {settings.airborne_min_m:g} m above take-off):")
+    print(
+        f"pooled over {len(flights)} {args.split} flights, {definition.grid_hz:g} Hz grid, "
+        f"airborne epochs (truth > {settings.airborne_min_m:g} m above take-off):"
+    )
     print(text_table(scores))
     print()
     for line in provenance_lines(prov):
@@ -170,6 +172,110 @@ def run(args: argparse.Namespace) -> int:
     )
     prov["wall_time"] = timing
     json_path = write_summary_json(scores, prov, out / JSON_FILE)
+    print(f"table (Markdown): {table_path}; summary: {json_path}")
+    print(f"wall time {timing}")
+    return 0
+
+
+def _run_multi(
+    args: argparse.Namespace,
+    definition: BenchDefinition,
+    profiles: list[Profile],
+    site: Site,
+    flights: list[CachedFlight],
+    missing: list[CachedFlight],
+    out: Path,
+    wall0: float,
+) -> int:
+    """The multi-UAV part: the multi-UAV tracker per profile and flight, scored as a set."""
+    from uav_fusion.batch import Engine
+    from uav_fusion.core.bench.multi import (
+        CSV_FILE as MULTI_CSV,
+    )
+    from uav_fusion.core.bench.multi import (
+        FIGURE_FILE as MULTI_FIGURE,
+    )
+    from uav_fusion.core.bench.multi import (
+        MultiScoreTask,
+        markdown_multi,
+        markdown_multi_flights,
+        multi_score_task,
+        pool_multi,
+        text_multi,
+        write_multi_csv,
+        write_multi_figure,
+    )
+
+    for p in profiles:
+        if not p.uses_tracker:
+            raise ConfigError(
+                f"{p.source}: the multi-UAV benchmark needs a tracker profile (association.mode "
+                f"track_score); {p.name!r} is not one"
+            )
+    engine = Engine(workers=args.workers, scheduler=args.scheduler, processes=not args.threads)
+    settings = definition.settings
+    with engine:
+        engine_desc = engine.description
+        print(f"  engine: {engine_desc}")
+        t0 = time.perf_counter()
+        engine.map(
+            generate_task,
+            [GenerateTask(f, definition, site) for f in missing],
+            label="generate",
+            describe=lambda t: t.flight.flight_id,
+        )
+        t_gen = time.perf_counter() - t0
+        tasks = [
+            MultiScoreTask(
+                f, p, site, definition.grid_hz, settings.airborne_min_m,
+                settings.observable_window_s,
+            )
+            for p in profiles
+            for f in flights
+        ]  # fmt: skip
+        t0 = time.perf_counter()
+        results = engine.map(
+            multi_score_task,
+            tasks,
+            label="run+score",
+            describe=lambda t: f"{t.profile.name} on {t.flight.flight_id}",
+        )
+        t_run = time.perf_counter() - t0
+    scores = pool_multi(results)
+    prov = provenance(
+        args.split,
+        len(flights),
+        definition.source,
+        {"profiles": ", ".join(f"{p.name} ({p.source})" for p in profiles)},
+    )
+    print()
+    print(
+        f"pooled over {len(flights)} {args.split} flights, {definition.grid_hz:g} Hz grid, "
+        f"GOSPA p 2, c 100 m, alpha 2; a UAV counts when more than "
+        f"{settings.airborne_min_m:g} m above its first truth sample:"
+    )
+    print(text_multi(scores))
+    print()
+    for line in provenance_lines(prov):
+        print(f"  {line}")
+    csv_path = write_multi_csv(results, out / MULTI_CSV)
+    table_path = out / TABLE_FILE
+    table_path.write_text(
+        markdown_multi(scores) + "\n\n" + markdown_multi_flights(results) + "\n",
+        encoding="utf-8",
+    )
+    print(f"per-flight, per-UAV figures: {csv_path}")
+    if not args.no_figure:
+        print(f"figure: {write_multi_figure(results, out / MULTI_FIGURE)}")
+    wall = time.perf_counter() - wall0
+    timing = (
+        f"{wall:.1f} s (generation {t_gen:.1f} s for {len(missing)} flights, "
+        f"runs {t_run:.1f} s for {len(tasks)} profile x flight tasks; {engine_desc})"
+    )
+    prov["wall_time"] = timing
+    doc = {"provenance": prov, "profiles": {k: v.as_dict() for k, v in scores.items()}}
+    json_path = out / JSON_FILE
+    json_path.write_text(json.dumps(doc, indent=2, allow_nan=True) + "\n", encoding="utf-8")
     print(f"table (Markdown): {table_path}; summary: {json_path}")
     print(f"wall time {timing}")
     return 0

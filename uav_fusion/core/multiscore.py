@@ -234,6 +234,11 @@ class UavSamples:
     track_ids: tuple[int | None, ...]  # per airborne epoch: the assigned track id, or None
     id_switches: int
     fragmentations: int
+    times: FloatArray = field(default_factory=lambda: np.zeros(0))  # the airborne epochs
+
+    def covered(self) -> npt.NDArray[np.bool_]:
+        """Per airborne epoch: a track was assigned within the cut-off."""
+        return np.array([tid is not None for tid in self.track_ids], dtype=bool)
 
 
 @dataclass(frozen=True)
@@ -406,6 +411,7 @@ def score_flight(
     K = grid_t.size
     dist, loc, mis, fal = np.zeros(K), np.zeros(K), np.zeros(K), np.zeros(K)
     ids: dict[str, list[int | None]] = {name: [] for name in names}
+    when: dict[str, list[float]] = {name: [] for name in names}
     errs: dict[str, list[float]] = {name: [] for name in names}
     n_false = 0
     assignments: list[EpochAssignment] = []
@@ -430,6 +436,7 @@ def score_flight(
         pairs: list[tuple[str, int]] = []
         used: set[int] = set()
         for i, name in enumerate(present):
+            when[name].append(float(grid_t[k]))
             a, e = g.assignment[i], g.errors_m[i]
             if a is None or e is None or not e < s.gospa.c_m:
                 ids[name].append(None)
@@ -451,6 +458,7 @@ def score_flight(
             track_ids=tuple(ids[name]),
             id_switches=id_switches(ids[name]),
             fragmentations=fragmentations(ids[name]),
+            times=np.asarray(when[name], dtype=float),
         )
         for name in names
     )

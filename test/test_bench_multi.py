@@ -1,0 +1,152 @@
+"""The multi-UAV benchmark: definition, per-flight task, crossings, pooled figures, command."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from uav_fusion.cli import main
+from uav_fusion.core.bench.cache import cached_flights
+from uav_fusion.core.bench.definition import load_definition
+from uav_fusion.core.bench.multi import (
+    MultiScoreTask,
+    crossings,
+    multi_score_task,
+    pool_multi,
+)
+from uav_fusion.core.bench.run import GenerateTask, generate_task
+from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.estimator import load_profile
+from uav_fusion.core.estimator.multi import MultiTracker, run_multi
+from uav_fusion.core.estimator.runner import tracker_stream
+from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, pool, score_flight
+from uav_fusion.core.records import Flight, TruthFix
+from uav_fusion.core.site import load_site
+from uav_fusion.resources import DEFAULT_SITE, config_path
+
+SITE_FILE = config_path(DEFAULT_SITE)
+
+
+def _def(tmp: Path, **changes: object) -> Path:
+    doc: dict[str, object] = {
+        "name": "multi_small",
+        "targets": "multi",
+        "plans": ["multi_crossing_pair"],
+        "splits": {"tune": [3], "test": [4]},
+        "duration_s": 200.0,
+    }
+    doc.update(changes)
+    p = tmp / "multi_small.yaml"
+    p.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    return p
+
+
+def test_the_shipped_multi_definition() -> None:
+    d = load_definition("multi")
+    assert d.multi and d.grid_hz == 1.0
+    assert len(d.flights("tune")) == len(d.flights("test")) == 6
+    assert not {f.seed for f in d.flights("tune")} & {f.seed for f in d.flights("test")}
+
+
+def test_an_unknown_targets_kind_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"multi_small\.yaml: targets must be one of"):
+        load_definition(_def(tmp_path, targets="many"))
+
+
+def _fixes(t: np.ndarray, e: np.ndarray, n: np.ndarray, u: np.ndarray) -> list[TruthFix]:
+    return [
+        TruthFix(float(a), 0.0, 0.0, 0.0, float(b), float(c), float(d), (0.0, 0.0, 0.0), 6, 18)
+        for a, b, c, d in zip(t, e, n, u, strict=True)
+    ]
+
+
+def test_crossings_are_closest_approaches_of_airborne_uavs() -> None:
+    t = np.arange(0.0, 200.0, 0.2)
+    up = np.where(t > 10.0, 40.0, 0.0)  # both on the ground for 10 s
+    # uav1 flies east along n = 0, uav2 north along e = 0: they meet at t = 100 s, 8 m apart
+    # vertically; later uav2 turns back and passes again 150 m away (no crossing)
+    a = _fixes(t, 10.0 * (t - 100.0), 0.0 * t, up)
+    b = _fixes(t, 0.0 * t + 0.0, 10.0 * (t - 100.0), up + 8.0 * (t > 10.0))
+    flight = Flight("x", a, [], [], vehicles={"uav1": a, "uav2": b})
+    got = crossings(flight)
+    assert len(got) == 1
+    name_a, name_b, when = got[0]
+    assert (name_a, name_b) == ("uav1", "uav2") and when == pytest.approx(100.0, abs=0.5)
+    far = _fixes(t, 0.0 * t + 150.0, 10.0 * (t - 100.0), up)
+    assert crossings(Flight("x", a, [], [], vehicles={"uav1": a, "uav2": far})) == []
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    tmp = tmp_path_factory.mktemp("multi")
+    d = _def(tmp)
+    cache = tmp / "cache"
+    cf = cached_flights(load_definition(d), "test", cache, SITE_FILE)[0]
+    assert generate_task(GenerateTask(cf, load_definition(d), load_site())) is True
+    return d, cache
+
+
+def test_the_task_scores_the_flight_as_run_multi_and_score_flight_do(
+    small: tuple[Path, Path],
+) -> None:
+    d_path, cache = small
+    d = load_definition(d_path)
+    site = load_site()
+    cf = cached_flights(d, "test", cache, SITE_FILE)[0]
+    profile = load_profile("tracker")
+    task = MultiScoreTask(cf, profile, site, d.grid_hz, 5.0, 2.0)
+    res = pickle.loads(pickle.dumps(multi_score_task(pickle.loads(pickle.dumps(task)))))
+    # the same by hand
+    flight = load_flight(cf.folder, site)
+    truths = {v: UavTruth(*flight.truth_arrays(v)) for v in flight.vehicles}
+    t0 = min(float(x.t[0]) for x in truths.values())
+    t1 = max(float(x.t[-1]) for x in truths.values())
+    epochs = run_multi(MultiTracker(profile, site), list(tracker_stream(flight, profile)), 1.0,
+                       t0, t1)  # fmt: skip
+    ref = score_flight(truths, epochs, MultiScoreSettings())
+    assert np.array_equal(res.samples.distance, ref.distance)
+    assert [u.track_ids for u in res.samples.uavs] == [u.track_ids for u in ref.uavs]
+    # uav2 is the silent one; both UAVs are seen by the radar, so both have observable epochs
+    assert [(u.name, u.silent) for u in res.uavs] == [("uav1", False), ("uav2", True)]
+    for u, s in zip(res.uavs, res.samples.uavs, strict=True):
+        assert 0 < u.observable <= s.epochs
+        assert u.observable_covered <= min(u.observable, s.assigned)
+    assert res.flight_s == pytest.approx(ref.epochs * 1.0)
+    pooled = pool_multi([res])["tracker"]
+    sc = pool([ref])
+    assert pooled.gospa_mean_m == pytest.approx(sc.gospa_mean_m)
+    assert pooled.false_track_pct == pytest.approx(100.0 * sc.false_track_s / ref.epochs)
+    assert pooled.worst_uav_coverage_pct == pytest.approx(min(u.coverage_pct for u in sc.uavs))
+    assert math.isfinite(pooled.silent_observable_coverage_pct)
+
+
+def test_the_bench_command_runs_the_multi_part(small: tuple[Path, Path], tmp_path: Path) -> None:
+    d_path, cache = small
+    out = tmp_path / "out"
+    argv = ["bench", "--definition", str(d_path), "--profiles", "tracker", "--split", "test",
+            "--cache", str(cache), "--out", str(out), "--threads", "--workers", "1"]  # fmt: skip
+    assert main(argv) == 0
+    doc = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    sc = doc["profiles"]["tracker"]
+    assert sc["flights"] == 1 and 0.0 < sc["coverage_pct"] <= 100.0
+    with (out / "per_flight_multi.csv").open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [(r["uav"], r["silent"]) for r in rows] == [("uav1", "0"), ("uav2", "1")]
+    assert (out / "bench_multi.png").stat().st_size > 10_000
+    assert "| tracker | 1 |" in (out / "table.md").read_text(encoding="utf-8")
+
+
+def test_the_multi_part_needs_a_tracker_profile(small: tuple[Path, Path], tmp_path: Path) -> None:
+    d_path, cache = small
+    out = str(tmp_path / "o")
+    argv = ["bench", "--definition", str(d_path), "--profiles", "paper", "--split", "test",
+            "--cache", str(cache), "--out", out, "--threads", "--workers", "1"]  # fmt: skip
+    assert main(argv) == 2
