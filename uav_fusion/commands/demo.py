@@ -26,6 +26,7 @@ from uav_fusion.core.errors import ConfigError
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
 HELP = "run the live node graph on the default flight and write the evaluation to out/demo/"
+MULTI_PLAN = "multi_crossing_pair"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,6 +70,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with --bag: also run bag_recorder and record the fusion node's outputs "
         "and views and its inputs (fusion/*, radar/*, rf/fix, truth/fix, /diagnostics) into "
         "this rosbag2 MCAP directory",
+    )
+    parser.add_argument(
+        "--multi",
+        action="store_true",
+        help="the multi-UAV graph: a twin flight with several UAVs (generated from "
+        "--multi-plan with --multi-seed into <out>/flight unless --flight is given), the "
+        "fusion node's multi-UAV tracker on fusion/tracks, scored as a set by the evaluator, "
+        "compared with the offline run (profile: tracker unless --profile names another "
+        "tracker profile)",
+    )
+    parser.add_argument(
+        "--multi-plan",
+        default=MULTI_PLAN,
+        metavar="PLAN",
+        help=f"--multi: flight plan name or YAML path (default: {MULTI_PLAN})",
+    )
+    parser.add_argument(
+        "--multi-seed", type=int, default=1, metavar="N", help="--multi: twin seed (default: 1)"
     )
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
     parser.add_argument("--no-check", action="store_true", help="skip the offline comparison")
@@ -117,6 +136,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"{args.record}: already exists; bag_recorder writes a new directory")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
+    if args.multi:
+        if args.bag:
+            raise ConfigError("--multi replays a flight folder; it does not go with --bag")
+        return _run_multi(args, out)
     if args.bag:
         return _run_bag(args, flight_dir, out)
 
@@ -198,6 +221,208 @@ def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: s
     )
     print(f"demo: report written to {res.report}")
     return live
+
+
+def _multi_flight(args: argparse.Namespace, out: Path) -> Path:
+    """The multi-UAV demo's flight: ``--flight``, or a twin flight generated into ``out``."""
+    if args.flight:
+        return Path(args.flight)
+    from uav_fusion.core.site import load_site
+    from uav_fusion.core.twin.config import load_twin_config
+    from uav_fusion.core.twin.generate import generate_twin
+    from uav_fusion.core.twin.trajectory import load_flight_plan
+    from uav_fusion.core.twin.writers import write_twin
+    from uav_fusion.resources import config_path
+
+    name = str(args.multi_plan)
+    path = Path(name) if name.endswith((".yaml", ".yml")) else config_path(
+        f"waypoints/{name}.yaml"
+    )
+    if not path.is_file():
+        raise ConfigError(f"--multi-plan: flight plan {path} not found")
+    site = load_site(args.site)
+    plan = load_flight_plan(path, site)
+    twin = generate_twin(site, load_twin_config(), plan, seed=int(args.multi_seed))
+    folder = out / "flight"
+    if folder.exists():
+        import shutil
+
+        shutil.rmtree(folder)
+    write_twin(twin, folder)
+    print(
+        f"demo: generated {plan.name} (seed {args.multi_seed}, "
+        f"{1 + len(plan.others)} UAVs) into {folder}",
+        flush=True,
+    )
+    return folder
+
+
+def _run_multi(args: argparse.Namespace, out: Path) -> int:
+    """The multi-UAV graph on one flight, and its comparison with the offline run."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.impl.logging_severity import LoggingSeverity
+    from rclpy.logging import set_logger_level
+
+    from uav_fusion.core.dataset import load_flight
+    from uav_fusion.core.estimator import load_profile
+    from uav_fusion.core.site import load_site
+    from uav_fusion.nodes.graph import Graph
+
+    profile_name = args.profile if args.profile != "paper" else "tracker"
+    profile = load_profile(profile_name)
+    if not profile.uses_tracker:
+        raise ConfigError(f"--multi needs a tracker profile; {profile_name!r} is not one")
+    flight_dir = _multi_flight(args, out)
+    site = load_site(args.site)
+    flight = load_flight(flight_dir, site)
+    vehicles = list(flight.vehicles)
+    ov = _overrides(args, flight_dir, out)
+    ov["radar_replay"]["profile"] = profile_name
+    ov["fusion_node"].update(
+        {"profile": profile_name, "multi_target": True, "stall_timeout_s": 0.0}
+    )
+    hz = 10.0
+    ov["fusion_node"]["frequency"] = hz
+    ov["evaluator_node"].update(
+        {
+            "grid_topic": "fusion/odom",
+            "tracks_topic": "fusion/tracks",
+            "tracks_hz": hz,
+            "vehicles": ",".join(vehicles),
+        }
+    )
+    ctx = Context()
+    rclpy.init(context=ctx, args=[])
+    graph: Graph | None = None
+    try:
+        graph = Graph(ctx, ov)
+        if args.quiet:
+            for n in graph.nodes:
+                set_logger_level(n.get_logger().name, LoggingSeverity.WARN)
+        print(
+            f"demo: multi-UAV graph, profile {profile_name}, {len(vehicles)} UAVs "
+            f"({', '.join(vehicles)}): replaying {flight_dir} at "
+            + ("full speed (rate 0)" if args.rate == 0 else f"{args.rate:g}x real time")
+            + f", ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}",
+            flush=True,
+        )
+        res = graph.run(timeout_s=args.timeout)
+        if not res.ok:
+            print(f"demo: {res.message}", file=sys.stderr)
+            return 1
+        live = graph.evaluator.multi_score()
+        with graph.evaluator._lock:
+            received = sorted(graph.evaluator._tracks, key=lambda r: (r[0], r[1]))
+        published = graph.fusion.tracks_published
+        flight_s = graph.driver.t_end - graph.driver.t_start
+    finally:
+        if graph is not None:
+            graph.destroy()
+        rclpy.shutdown(context=ctx)
+    print(
+        f"demo: {sum(res.published.values())} messages over {flight_s:.0f} s of flight in "
+        f"{res.wall_s:.1f} s wall ({flight_s / res.wall_s:.0f}x real time); {published} track "
+        f"messages on fusion/tracks"
+    )
+    print(f"demo: report written to {res.report}")
+    if live is None:
+        print("demo: no multi-target score (no truth received)", file=sys.stderr)
+        return 1
+    print()
+    print(format_multi(live))
+    print()
+    if args.no_check:
+        return 0
+    return _compare_multi_offline(flight, profile, site, hz, received, live)
+
+
+def format_multi(sc: Any) -> str:
+    """The multi-target score as a small table: the set, then one row per UAV."""
+    lines = [
+        f"GOSPA (p 2, c 100 m, alpha 2) mean {sc.gospa_mean_m:.1f} m over {sc.epochs} epochs; "
+        f"false-track time {sc.false_track_s:.1f} s; {sc.id_switches} id switches",
+        f"{'UAV':<8} | {'airborne epochs':>15} | {'coverage %':>10} | {'error mean m':>12} | "
+        f"{'p95 m':>7} | {'id switches':>11}",
+    ]
+    lines.append("-" * len(lines[1]))
+    for u in sc.uavs:
+        lines.append(
+            f"{u.name:<8} | {u.epochs:>15d} | {u.coverage_pct:>10.1f} | {u.err_mean_m:>12.1f} | "
+            f"{u.err_p95_m:>7.1f} | {u.id_switches:>11d}"
+        )
+    return "\n".join(lines)
+
+
+def _compare_multi_offline(
+    flight: Any, profile: Any, site: Any, hz: float, received: list[Any], live: Any
+) -> int:
+    """Run the multi-UAV tracker over the same flight offline (the grid the node emits while
+    processing) and compare its tracks and score with the live ones."""
+    import math
+
+    import numpy as np
+
+    from uav_fusion.core.estimator.multi import MultiGrid, MultiTracker
+    from uav_fusion.core.estimator.runner import tracker_stream
+    from uav_fusion.core.multiscore import (
+        MultiScoreSettings,
+        UavTruth,
+        epochs_from_published,
+        pool,
+        score_flight,
+    )
+    from uav_fusion.core.records import RadarFrame
+
+    t_start = time.perf_counter()
+    mt = MultiTracker(profile, site)
+    grid = MultiGrid(mt, hz)
+    rows: list[tuple[float, int, Any]] = []
+    for item in tracker_stream(flight, profile):
+        for ep in grid.before(item.t):
+            rows.extend((ep.t, o.track_id, o.x) for o in ep.tracks)
+        if isinstance(item, RadarFrame):
+            mt.process_radar_frame(item)
+        else:
+            mt.process_rf(item)
+    rows.sort(key=lambda r: (r[0], r[1]))
+    same = [(t, i) for t, i, _ in rows] == [(t, i) for t, i, _ in received]
+    worst = max(
+        (float(np.max(np.abs(np.asarray(a[2]) - np.asarray(b[2])))) for a, b in
+         zip(rows, received, strict=False)),
+        default=0.0,
+    )  # fmt: skip
+    truths = {}
+    for v in flight.vehicles:
+        t, enu = flight.truth_arrays(v)
+        if t.size >= 2:
+            truths[v] = UavTruth(t=t, enu=enu)
+    t0 = min(float(x.t[0]) for x in truths.values())
+    t1 = max(float(x.t[-1]) for x in truths.values())
+    ref = pool(
+        [
+            score_flight(
+                truths,
+                epochs_from_published(rows, hz, t0, t1),
+                MultiScoreSettings(step_s=1.0 / hz),
+            )
+        ]
+    )
+    diff = abs(ref.gospa_mean_m - live.gospa_mean_m)
+    if same and worst <= 1e-9 and diff <= 1e-9 and not math.isnan(ref.gospa_mean_m):
+        print(
+            f"demo: the live tracks on fusion/tracks equal the offline run's ({len(rows)} track "
+            f"states, largest difference {worst:.1e} m), and so do the scores (GOSPA mean "
+            f"{ref.gospa_mean_m:.3f} m both; offline check {time.perf_counter() - t_start:.1f} s)"
+        )
+        return 0
+    print(
+        f"demo: live and offline differ: {len(received)} live track states vs {len(rows)} "
+        f"offline, largest state difference {worst:.3g} m, GOSPA mean live "
+        f"{live.gospa_mean_m:.3f} m vs offline {ref.gospa_mean_m:.3f} m",
+        file=sys.stderr,
+    )
+    return 1
 
 
 def format_side_by_side(lives: dict[str, Any], digits: int = 1) -> str:

@@ -540,3 +540,44 @@ def pool(flights: Sequence[FlightSamples]) -> MultiScore:
         false_mean=_mean([f.false for f in flights]),
         uavs=tuple(uav_scores),
     )
+
+
+def epochs_from_published(
+    published: Sequence[tuple[float, int, FloatArray]],
+    frequency_hz: float,
+    t0: float,
+    t1: float,
+) -> list[EpochTracks]:
+    """A fixed-rate multi-track output as a subscriber sees it: every epoch ``k / frequency``
+    in ``[t0, t1]`` with the (time, track id, state) messages received for it, and no track at
+    the others (an epoch without a confirmed track publishes nothing). A repeated (epoch, id)
+    keeps the last message."""
+    if not (math.isfinite(frequency_hz) and frequency_hz > 0):
+        raise ValueError(f"frequency_hz must be finite and > 0, got {frequency_hz}")
+    k0 = math.ceil(t0 * frequency_hz - 1e-9)
+    k1 = math.floor(t1 * frequency_hz + 1e-9)
+    per: dict[int, dict[int, FloatArray]] = {}
+    for t, tid, x in published:
+        k = round(t * frequency_hz)
+        if k0 <= k <= k1:
+            per.setdefault(k, {})[int(tid)] = np.asarray(x, dtype=float)
+    return [
+        EpochTracks(
+            k / frequency_hz,
+            tuple(TrackEstimate(tid, x) for tid, x in sorted(per.get(k, {}).items())),
+        )
+        for k in range(k0, k1 + 1)
+    ]
+
+
+def multi_summary(sc: MultiScore) -> str:
+    """One line of a multi-target score (for reports and logs)."""
+    per = "; ".join(
+        f"{u.name} {u.coverage_pct:.1f} % of {u.epochs} epochs, {u.id_switches} id switches"
+        for u in sc.uavs
+    )
+    return (
+        f"GOSPA mean {sc.gospa_mean_m:.1f} m over {sc.epochs} epochs; coverage "
+        f"{sc.coverage_pct:.1f} %, error mean {sc.err_mean_m:.1f} m; false-track time "
+        f"{sc.false_track_s:.1f} s; {per}"
+    )

@@ -11,7 +11,16 @@ Subscribes (topic names are parameters; defaults from docs/graph.md):
   scored on its grid (``grid_hz``) like the accuracy benchmark (:mod:`uav_fusion.core.
   gridscore`: coverage of the airborne epochs, error mean / p95 / max, gross share, ANEES);
   the figures go into the report's header and metrics.json. A message off the grid is
-  counted (``off_grid``) and not scored.
+  counted (``off_grid``) and not scored;
+- with ``tracks_topic`` set (``fusion/tracks`` of a fusion node with ``multi_target``): every
+  confirmed track at every epoch of its grid (``tracks_hz``; Odometry, ``child_frame_id``
+  ``track_<id>``), scored as a set against every UAV's truth on ``truth/<vehicle>/fix``
+  (the vehicles listed in ``vehicles``, or, with ``vehicles`` empty, every such topic the
+  node discovers) like the multi-UAV benchmark (:mod:`uav_fusion.core.multiscore`: GOSPA
+  with p 2, c 100 m, alpha 2; per-UAV coverage, errors, ID switches; false-track seconds).
+  The epochs from the first truth sample to the last one (the report), or to the last track
+  message (the periodic log and /diagnostics), are scored; an epoch without a message has no
+  track.
 
 Every message goes into a :class:`uav_fusion.core.evaluation.Evaluator`; nothing is scored on
 arrival, so estimates that arrive before the truth bracketing them are scored exactly once
@@ -33,6 +42,7 @@ logs a warning.
 from __future__ import annotations
 
 import math
+import re
 import sys
 import threading
 from collections import Counter
@@ -56,6 +66,15 @@ from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, 
 from uav_fusion.core.grid import grid_from_published, on_grid
 from uav_fusion.core.gridscore import FlightTruth, GridScore, score_grid
 from uav_fusion.core.gridscore import pool as pool_grid
+from uav_fusion.core.multiscore import (
+    MultiScore,
+    MultiScoreSettings,
+    UavTruth,
+    epochs_from_published,
+    multi_summary,
+    score_flight,
+)
+from uav_fusion.core.multiscore import pool as pool_multi
 from uav_fusion.core.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.ros.conversions import (
@@ -76,6 +95,9 @@ from uav_fusion.ros.runtime import run_node
 M = TypeVar("M")
 
 NODE_NAME = "evaluator_node"
+#: a vehicle's truth topic, and a track's child frame on tracks_topic
+VEHICLE_TOPIC = re.compile(r"^/?truth/(?P<vehicle>[A-Za-z0-9][A-Za-z0-9-]*)/fix$")
+TRACK_FRAME = re.compile(r"^track_(?P<id>\d+)$")
 #: wall seconds the stop (writing the report with its figures) and teardown may take
 REPORT_GRACE_S = 120.0
 
@@ -113,6 +135,14 @@ PARAMS: tuple[Param, ...] = (
           "fixed-rate output to score on its grid ('' = none; fusion/odom of tracker profiles)"),
     Param("grid_hz", 10.0, "rate of grid_topic (the fusion node's frequency)", lo=0.01,
           hi=1000.0),
+    Param("tracks_topic", "",
+          "every confirmed track of the multi-UAV tracker to score as a set ('' = none; "
+          "fusion/tracks)"),
+    Param("tracks_hz", 10.0, "rate of tracks_topic (the fusion node's frequency)", lo=0.01,
+          hi=1000.0),
+    Param("vehicles", "",
+          "comma-separated UAV names whose truth/<vehicle>/fix topics score tracks_topic "
+          "('' = every such topic discovered)"),
     Param("clock_jump_back_s", 1.0,
           "a backwards jump of the simulated clock larger than this restarts the evaluation",
           lo=0.0, hi=1e9),
@@ -153,6 +183,19 @@ class EvaluatorNode(Node):
         self.coasted_topic = str(v["odom_coasted_topic"])
         self.grid_topic = str(v["grid_topic"])
         self.grid_hz = float(v["grid_hz"])
+        self.tracks_topic = str(v["tracks_topic"])
+        self.tracks_hz = float(v["tracks_hz"])
+        listed = [x.strip() for x in str(v["vehicles"]).split(",") if x.strip()]
+        bad = [x for x in listed if VEHICLE_TOPIC.match(f"truth/{x}/fix") is None]
+        if bad:
+            raise UavFusionError(
+                f"{NODE_NAME}: bad parameters: vehicles: {', '.join(map(repr, bad))} are not "
+                "vehicle names (letters, digits and '-')"
+            )
+        self.vehicles_listed = listed
+        # multi-target scoring: (t, track id, state) per track message, truth per vehicle
+        self._tracks: list[tuple[float, int, Any]] = []
+        self._vehicle_truth: dict[str, list[tuple[float, float, float, float]]] = {}
         # the fixed-rate output received (t, x, P) and the truth's height (t, h) for scoring it
         self._grid: list[tuple[float, Any, Any]] = []
         self._truth_h: list[tuple[float, float, float, float, float]] = []
@@ -199,6 +242,15 @@ class EvaluatorNode(Node):
         self.create_subscription(Odometry, self.coasted_topic, self._on_coasted, qos)
         if self.grid_topic:
             self.create_subscription(Odometry, self.grid_topic, self._on_grid, qos)
+        self._qos = qos
+        if self.tracks_topic:
+            self.create_subscription(Odometry, self.tracks_topic, self._on_tracks, qos)
+            for name in self.vehicles_listed:
+                self._subscribe_vehicle(name)
+            if not self.vehicles_listed:
+                self.create_timer(
+                    0.5, self._discover_vehicles, clock=Clock(clock_type=ClockType.STEADY_TIME)
+                )
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/write_report", self._on_write_report)
         self._logged_at = -1
@@ -243,6 +295,9 @@ class EvaluatorNode(Node):
             self.evaluator = self._new_evaluator()
             self._grid.clear()
             self._truth_h.clear()
+            self._tracks.clear()
+            for rows in self._vehicle_truth.values():
+                rows.clear()
         self.get_logger().warning(
             f"simulated clock jumped back {last - now:.3f} s (from {last:.3f} to {now:.3f}; a "
             f"bag loop?): evaluation restarted; report of the finished timeline: {where}"
@@ -301,6 +356,81 @@ class EvaluatorNode(Node):
             self.grid_hz, t0, t1,
         )  # fmt: skip
         return pool_grid([score_grid(grid, ft)])
+
+    # --- multi-target scoring ------------------------------------------------------------
+    @property
+    def vehicle_topics(self) -> list[str]:
+        """The vehicles whose truth topic this node reads (multi-target scoring)."""
+        return list(self._vehicle_truth)
+
+    def _subscribe_vehicle(self, name: str) -> None:
+        if name in self._vehicle_truth:
+            return
+        self._vehicle_truth[name] = []
+        topic = f"truth/{name}/fix"
+
+        def feed(msg: NavSatFix) -> bool:
+            return self._vehicle_fix(name, msg)
+
+        def on_fix(msg: NavSatFix) -> None:
+            self._guard(topic, feed, msg)
+
+        self.create_subscription(NavSatFix, topic, on_fix, self._qos)
+        self.get_logger().info(f"scoring {self.tracks_topic} against {topic}")
+
+    def _discover_vehicles(self) -> None:
+        """Subscribe every truth/<vehicle>/fix topic that has appeared in the graph."""
+        for name, types in self.get_topic_names_and_types():
+            m = VEHICLE_TOPIC.match(name)
+            if m is not None and "sensor_msgs/msg/NavSatFix" in types:
+                self._subscribe_vehicle(m["vehicle"])
+
+    def _vehicle_fix(self, vehicle: str, msg: NavSatFix) -> bool:
+        fix = navsatfix_to_truth(msg, self.site)
+        self._vehicle_truth[vehicle].append((fix.t, fix.e, fix.n, fix.u))
+        return True
+
+    def _track(self, msg: Odometry) -> bool:
+        self._check_frame(msg.header.frame_id)
+        s = odometry_to_state(msg)
+        m = TRACK_FRAME.match(msg.child_frame_id)
+        if m is None:
+            raise MessageError(
+                "bad_track_id", f"child_frame_id {msg.child_frame_id!r} is not track_<id>"
+            )
+        if not on_grid(s.t, self.tracks_hz):
+            raise MessageError("off_grid", f"stamp {s.t:.6f} is not a {self.tracks_hz:g} Hz epoch")
+        self._tracks.append((s.t, int(m["id"]), s.x))
+        return True
+
+    def _on_tracks(self, msg: Odometry) -> None:
+        self._guard(self.tracks_topic, self._track, msg)
+
+    def multi_score(self, final: bool = True) -> MultiScore | None:
+        """The tracks received so far scored as a set against every vehicle's truth (None
+        without ``tracks_topic`` or without a vehicle with two truth samples). ``final``:
+        up to the last truth sample; otherwise up to the last track message."""
+        with self._lock:
+            truth = {k: sorted(v) for k, v in self._vehicle_truth.items()}
+            tracks = list(self._tracks)
+        if not self.tracks_topic:
+            return None
+        truths: dict[str, UavTruth] = {}
+        for name, rows in truth.items():
+            arr = np.array(rows, dtype=float).reshape(-1, 4)
+            if arr.shape[0]:
+                arr = arr[np.concatenate(([True], np.diff(arr[:, 0]) > 0))]
+            if arr.shape[0] >= 2:
+                truths[name] = UavTruth(t=arr[:, 0], enu=arr[:, 1:4])
+        if not truths:
+            return None
+        t0 = min(float(tr.t[0]) for tr in truths.values())
+        t1 = max(float(tr.t[-1]) for tr in truths.values())
+        if not final:
+            t1 = min(t1, max((t for t, _, _ in tracks), default=t0))
+        epochs = epochs_from_published(tracks, self.tracks_hz, t0, t1)
+        settings = MultiScoreSettings(step_s=1.0 / self.tracks_hz)
+        return pool_multi([score_flight(truths, epochs, settings)])
 
     def _radar_raw(self, msg: PoseWithCovarianceStamped) -> bool:
         m = msg_to_radar_measurement(msg, self.frame_id)
@@ -394,6 +524,17 @@ class EvaluatorNode(Node):
                   ("refused", self.refused), ("dropped", ev.dropped)]
         values = [(f"{what} {k}", str(v)) for what, c in counts for k, v in sorted(c.items())]
         values.append(("fused step gaps", self.gap_text(ev)))
+        ms = self.multi_score(final=False)
+        if ms is not None:
+            arr.status.append(make_status(
+                f"{self.get_name()}: tracks",
+                f"GOSPA mean {_num(ms.gospa_mean_m)} m, coverage {_num(ms.coverage_pct)} %",
+                [("vehicles", ", ".join(u.name for u in ms.uavs)),
+                 ("epochs", str(ms.epochs)), ("GOSPA mean m", _num(ms.gospa_mean_m)),
+                 ("coverage %", _num(ms.coverage_pct)), ("id switches", str(ms.id_switches)),
+                 ("false-track s", _num(ms.false_track_s))]
+                + [(f"{u.name} coverage %", _num(u.coverage_pct)) for u in ms.uavs],
+            ))
         values.append(("clock jumps back", str(self.clock_jumps_back)))
         arr.status.append(make_status(
             f"{self.get_name()}: inputs",
@@ -451,6 +592,9 @@ class EvaluatorNode(Node):
                 f"{gs.err_mean_m:.1f} m, p95 {gs.err_p95_m:.1f} m, max {gs.err_max_m:.1f} m; "
                 f"> 100 m {gs.gross_pct:.1f} %; ANEES {gs.anees:.2f} (3 when honest)"
             )
+        ms = self.multi_score()
+        if ms is not None:
+            info[f"tracks ({self.tracks_topic}, {self.tracks_hz:g} Hz)"] = multi_summary(ms)
         out = self.output_dir if folder is None else folder
         files = write_report(ev, out, self.site, info, figures=self.figures)
         self.last_report = files

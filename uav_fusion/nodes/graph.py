@@ -174,13 +174,25 @@ class Graph:
     def fusion_caught_up(self) -> bool:
         return self._fusion_count() + self._lost_offset[0] >= self.fusion_inputs_published()
 
+    def _evaluator_truth_pubs(self) -> list[Any]:
+        """The truth replay's publishers the evaluator reads: truth/fix, and the per-vehicle
+        topics it scores tracks against."""
+        pubs: list[Any] = [self.truth.pub]
+        ev = self.evaluator
+        if ev is not None and ev.tracks_topic:
+            pubs += [p for v, p in self.truth.vehicle_pubs.items() if v in ev.vehicle_topics]
+        return pubs
+
     def evaluator_expected(self) -> int:
         f = self.fusion
-        n = self.published("truth_replay") + self.driver.published_to(self.rf.pub)
+        n = sum(self.driver.published_to(p) for p in self._evaluator_truth_pubs())
+        n += self.driver.published_to(self.rf.pub)
         if self.radar.pub_raw is not None:
             n += self.driver.published_to(self.radar.pub_raw)
         if self.evaluator is not None and bool(self.evaluator.grid_topic):
             n += f.grid_published
+        if self.evaluator is not None and bool(self.evaluator.tracks_topic):
+            n += f.tracks_published
         return n + f.steps_published + f.accepted_published
 
     def evaluator_caught_up(self) -> bool:
@@ -288,7 +300,8 @@ class Graph:
         if ev is not None:
             got = ev.received
             pairs += [
-                ("evaluator_node: truth", self.published("truth_replay"), got[ev.truth_topic]),
+                ("evaluator_node: truth", self.driver.published_to(self.truth.pub),
+                 got[ev.truth_topic]),
                 ("evaluator_node: rf", self.driver.published_to(self.rf.pub), got[ev.rf_topic]),
             ]
             if self.radar.pub_raw is not None:
