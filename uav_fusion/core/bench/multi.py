@@ -55,7 +55,7 @@ from uav_fusion.core.twin.writers import MANIFEST
 
 FloatArray = npt.NDArray[np.float64]
 
-CROSSING_M = 60.0  # two UAVs passing closer than this cross
+CROSSING_M = 50.0  # two UAVs passing closer than this cross
 CROSSING_GAP_S = 20.0  # closest approaches of one pair closer in time than this are one
 CSV_FILE = "per_flight_multi.csv"
 FIGURE_FILE = "bench_multi.png"
