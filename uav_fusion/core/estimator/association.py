@@ -170,18 +170,24 @@ class ObjectTable:
         """Fold one report (with its R, computed here when not given) into its object
         (created on first sight)."""
         cfg = self.cfg
-        obj = self.objects.get(trk.track_id)
+        tid = trk.track_id
+        obj = self.objects.get(tid)
         t = trk.t
         if obj is None:
-            obj = self.objects[trk.track_id] = RadarObject(trk.track_id, t)
+            obj = self.objects[tid] = RadarObject(tid, t)
         dt = t - obj.last_t
+        e = trk.e
+        n = trk.n
+        u = trk.u
         if r is None:
-            r = self.radar_r.r_at(trk.e, trk.n, trk.u)
+            r = self.radar_r.r_at(e, n, u)
         kf = obj.kf
-        fresh = kf is None or dt < 0
-        if fresh:
-            kf = obj.kf = CvKalman((cfg.object_q, cfg.object_q, cfg.object_q))
-            kf.x = [trk.e, trk.n, trk.u, 0.0, 0.0, 0.0]
+        n_reports = obj.n_reports
+        rcs = trk.rcs_dbsm
+        if kf is None or dt < 0:
+            q = cfg.object_q
+            kf = obj.kf = CvKalman((q, q, q))
+            kf.x = [e, n, u, 0.0, 0.0, 0.0]
             v = 100.0
             kf.P = [
                 r[0], r[1], r[2], 0.0, 0.0, 0.0,
@@ -192,16 +198,17 @@ class ObjectTable:
                 v,
             ]  # fmt: skip
             dt = 0.0
-            obj.up = trk.u
-            obj.rcs_mean = trk.rcs_dbsm if trk.rcs_dbsm is not None else 0.0
-        # one smoothing factor per time constant for this interval (the EMAs below)
-        tau = cfg.speed_tau_s
-        a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
-        b = 1.0 - a
-        assert kf is not None
-        if not fresh:
-            kf.predict(dt)
-            nis = kf.update3(trk.e, trk.n, trk.u, r)
+            obj.up = u
+            obj.rcs_mean = rcs if rcs is not None else 0.0
+            # one smoothing factor per time constant for this interval (the EMAs below)
+            a = 0.0 if cfg.speed_tau_s <= 0 else 1.0
+            b = 1.0 - a
+        else:
+            # one smoothing factor per time constant for this interval (the EMAs below)
+            tau = cfg.speed_tau_s
+            a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
+            b = 1.0 - a
+            nis = kf.predict_update3(dt, e, n, u, r)
             if math.isfinite(nis):
                 obj.nis_mean = a * obj.nis_mean + b * min(nis, 100.0)
         vel = trk.vel_ned
@@ -211,12 +218,11 @@ class ObjectTable:
         else:
             x = kf.x
             spd = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
-        if obj.n_reports == 0:
+        if n_reports == 0:
             obj.speed = spd
         else:
             obj.speed = a * obj.speed + b * spd
-            obj.up = a * obj.up + b * trk.u
-            rcs = trk.rcs_dbsm
+            obj.up = a * obj.up + b * u
             if rcs is not None and math.isfinite(rcs):
                 obj.rcs_mean = a * obj.rcs_mean + b * rcs
         p = trk.uav_prob
@@ -225,14 +231,13 @@ class ObjectTable:
             pc = min(max(p, 1e-6), 1.0 - 1e-6)
             lg = max(-c, min(c, math.log(pc / (1.0 - pc))))
             obj.class_logit = (
-                lg if obj.n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
+                lg if n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
             )
-        sig = (trk.vel_ned, trk.rcs_dbsm)
-        obj.coasting = (
-            obj.signature is not None and trk.vel_ned is not None and sig == obj.signature
-        )
+        sig = (vel, rcs)
+        old = obj.signature
+        obj.coasting = old is not None and vel is not None and sig == old
         obj.signature = sig
-        obj.n_reports += 1
+        obj.n_reports = n_reports + 1
         obj.last_t = t
         return obj
 

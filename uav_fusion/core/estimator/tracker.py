@@ -240,6 +240,8 @@ class Tracker:
         self._pending_reset: str | None = None
         self._seq = 0
         self.counters: dict[str, int] = {}
+        # (x, P, packed bytes) of the last packed state (see _step)
+        self._packed: tuple[object, object, bytes] = (None, None, b"")
 
     # --- fixed-rate accessors -----------------------------------------------------------
     @property
@@ -297,7 +299,14 @@ class Tracker:
         f = self.filter
         if f is not None:
             x, p = f.mean()
-            state = _pack(*x, *p)
+            # the filters install new lists on every change, so the same two lists are the
+            # same state: pack it once for all the steps of a frame that leave it unchanged
+            packed = self._packed
+            if x is packed[0] and p is packed[1]:
+                state = packed[2]
+            else:
+                state = _pack(*x, *p)
+                self._packed = (x, p, state)
             probs = f.mode_probabilities()
             q = f.effective_q()
         else:
@@ -305,10 +314,12 @@ class Tracker:
             probs = ()
             q = (0.0, 0.0, 0.0)
         seq = self._seq
-        self._seq += 1
+        self._seq = seq + 1
         if status == DISCARDED:
-            self._count(DISCARDED)
-            self._count(f"rejected_{reason}")
+            c = self.counters
+            c[DISCARDED] = c.get(DISCARDED, 0) + 1
+            key = f"rejected_{reason}"
+            c[key] = c.get(key, 0) + 1
         return TrackerStep(
             t, source, status, reason, nis, state, len(z), track_id, seq, z, score, weight,
             probs, self.segment, q,
