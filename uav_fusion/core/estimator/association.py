@@ -210,7 +210,8 @@ class ObjectTable:
             b = 1.0 - a
             nis = kf.predict_update3(dt, e, n, u, r)
             if math.isfinite(nis):
-                obj.nis_mean = a * obj.nis_mean + b * min(nis, 100.0)
+                # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
+                obj.nis_mean = a * obj.nis_mean + b * (100.0 if nis > 100.0 else nis)
         vel = trk.vel_ned
         if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
             vn, ve, vd = vel
@@ -227,9 +228,16 @@ class ObjectTable:
                 obj.rcs_mean = a * obj.rcs_mean + b * rcs
         p = trk.uav_prob
         if p is not None and math.isfinite(p):
+            # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
             c = cfg.class_clip
-            pc = min(max(p, 1e-6), 1.0 - 1e-6)
-            lg = max(-c, min(c, math.log(pc / (1.0 - pc))))
+            pc = 1e-6 if p < 1e-6 else p
+            if pc > 1.0 - 1e-6:
+                pc = 1.0 - 1e-6
+            lg = math.log(pc / (1.0 - pc))
+            if c < lg:
+                lg = c
+            if -c > lg:
+                lg = -c
             obj.class_logit = (
                 lg if n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
             )
