@@ -238,9 +238,15 @@ class ObjectTable:
                 lg = c
             if -c > lg:
                 lg = -c
-            obj.class_logit = (
-                lg if n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
-            )
+            if n_reports == 0:
+                obj.class_logit = lg
+            else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
+                tau = cfg.class_tau_s
+                if tau <= 0:
+                    obj.class_logit = lg
+                else:
+                    a = math.exp(-dt / tau) if dt > 0 else 1.0
+                    obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
         sig = (vel, rcs)
         old = obj.signature
         obj.coasting = old is not None and vel is not None and sig == old
