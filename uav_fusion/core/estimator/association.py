@@ -151,10 +151,18 @@ class RadarObject:
             s -= cfg.ground_weight
         if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
             s -= cfg.erratic_weight
-        s += cfg.rf_weight * min(cfg.rf_max, self.rf_support_at(self.last_t, cfg.rf_tau_s))
+        # min(rf_max, rf_support_at(last_t)) and min(1, age / age_full_s) as conditionals
+        sup = self.rf_support
+        if sup != 0.0:
+            tau = cfg.rf_tau_s
+            sup = sup * math.exp(-(self.last_t - self.rf_t) / tau) if tau > 0 else 0.0
+        rf_max = cfg.rf_max
+        s += cfg.rf_weight * (sup if sup < rf_max else rf_max)
         s += cfg.fused_weight * self.fused
-        if cfg.age_full_s > 0:
-            s += cfg.age_weight * min(1.0, age / cfg.age_full_s)
+        full = cfg.age_full_s
+        if full > 0:
+            f = age / full
+            s += cfg.age_weight * (f if f < 1.0 else 1.0)
         return s
 
 
@@ -258,10 +266,17 @@ class ObjectTable:
     def mark_fused(self, obj: RadarObject, inside: bool, t: float) -> None:
         """Record whether the object's report at ``t`` fell inside the UAV track's gate."""
         v = 1.0 if inside else 0.0
-        if obj.fused_t is None:
+        last = obj.fused_t
+        if last is None:
             obj.fused = v
-        else:
-            obj.fused = _ema(obj.fused, v, t - obj.fused_t, self.cfg.fused_tau_s)
+        else:  # _ema(obj.fused, v, t - last, fused_tau_s), inlined
+            tau = self.cfg.fused_tau_s
+            if tau <= 0:
+                obj.fused = v
+            else:
+                dt = t - last
+                a = math.exp(-dt / tau) if dt > 0 else 1.0
+                obj.fused = a * obj.fused + (1.0 - a) * v
         obj.fused_t = t
 
     def rf_fix(self, t: float, e: float, n: float, var_m2: float) -> int:

@@ -82,6 +82,8 @@ FloatArray = npt.NDArray[np.float64]
 
 _pack = struct.Struct("27d").pack
 _NAN_STATE = _pack(*(math.nan,) * 27)
+# a filter's (x, P) lists with their packed bytes, mode probabilities and effective q
+_Packed = tuple[object, object, bytes, tuple[float, ...], tuple[float, float, float]]
 
 
 class TrackerStep(Step):
@@ -240,8 +242,8 @@ class Tracker:
         self._pending_reset: str | None = None
         self._seq = 0
         self.counters: dict[str, int] = {}
-        # (x, P, packed bytes) of the last packed state (see _step)
-        self._packed: tuple[object, object, bytes] = (None, None, b"")
+        # (x, P, packed bytes, mode probabilities, effective q) of the last step's state
+        self._packed: _Packed = (None, None, b"", (), (0.0, 0.0, 0.0))
 
     # --- fixed-rate accessors -----------------------------------------------------------
     @property
@@ -301,14 +303,15 @@ class Tracker:
             x, p = f.mean()
             # the filters install new lists on every change, so the same two lists are the
             # same state: pack it once for all the steps of a frame that leave it unchanged
+            # (the mode probabilities and the effective q change only with them too)
             packed = self._packed
             if x is packed[0] and p is packed[1]:
-                state = packed[2]
+                state, probs, q = packed[2], packed[3], packed[4]
             else:
                 state = _pack(*x, *p)
-                self._packed = (x, p, state)
-            probs = f.mode_probabilities()
-            q = f.effective_q()
+                probs = f.mode_probabilities()
+                q = f.effective_q()
+                self._packed = (x, p, state, probs, q)
         else:
             state = _NAN_STATE
             probs = ()
