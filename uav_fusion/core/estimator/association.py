@@ -151,10 +151,18 @@ class RadarObject:
             s -= cfg.ground_weight
         if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
             s -= cfg.erratic_weight
-        s += cfg.rf_weight * min(cfg.rf_max, self.rf_support_at(self.last_t, cfg.rf_tau_s))
+        # min(rf_max, rf_support_at(last_t)) and min(1, age / age_full_s) as conditionals
+        sup = self.rf_support
+        if sup != 0.0:
+            tau = cfg.rf_tau_s
+            sup = sup * math.exp(-(self.last_t - self.rf_t) / tau) if tau > 0 else 0.0
+        rf_max = cfg.rf_max
+        s += cfg.rf_weight * (sup if sup < rf_max else rf_max)
         s += cfg.fused_weight * self.fused
-        if cfg.age_full_s > 0:
-            s += cfg.age_weight * min(1.0, age / cfg.age_full_s)
+        full = cfg.age_full_s
+        if full > 0:
+            f = age / full
+            s += cfg.age_weight * (f if f < 1.0 else 1.0)
         return s
 
 
@@ -170,18 +178,24 @@ class ObjectTable:
         """Fold one report (with its R, computed here when not given) into its object
         (created on first sight)."""
         cfg = self.cfg
-        obj = self.objects.get(trk.track_id)
+        tid = trk.track_id
+        obj = self.objects.get(tid)
         t = trk.t
         if obj is None:
-            obj = self.objects[trk.track_id] = RadarObject(trk.track_id, t)
+            obj = self.objects[tid] = RadarObject(tid, t)
         dt = t - obj.last_t
+        e = trk.e
+        n = trk.n
+        u = trk.u
         if r is None:
-            r = self.radar_r.r_at(trk.e, trk.n, trk.u)
+            r = self.radar_r.r_at(e, n, u)
         kf = obj.kf
-        fresh = kf is None or dt < 0
-        if fresh:
-            kf = obj.kf = CvKalman((cfg.object_q, cfg.object_q, cfg.object_q))
-            kf.x = [trk.e, trk.n, trk.u, 0.0, 0.0, 0.0]
+        n_reports = obj.n_reports
+        rcs = trk.rcs_dbsm
+        if kf is None or dt < 0:
+            q = cfg.object_q
+            kf = obj.kf = CvKalman((q, q, q))
+            kf.x = [e, n, u, 0.0, 0.0, 0.0]
             v = 100.0
             kf.P = [
                 r[0], r[1], r[2], 0.0, 0.0, 0.0,
@@ -192,18 +206,20 @@ class ObjectTable:
                 v,
             ]  # fmt: skip
             dt = 0.0
-            obj.up = trk.u
-            obj.rcs_mean = trk.rcs_dbsm if trk.rcs_dbsm is not None else 0.0
-        # one smoothing factor per time constant for this interval (the EMAs below)
-        tau = cfg.speed_tau_s
-        a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
-        b = 1.0 - a
-        assert kf is not None
-        if not fresh:
-            kf.predict(dt)
-            nis = kf.update3(trk.e, trk.n, trk.u, r)
+            obj.up = u
+            obj.rcs_mean = rcs if rcs is not None else 0.0
+            # one smoothing factor per time constant for this interval (the EMAs below)
+            a = 0.0 if cfg.speed_tau_s <= 0 else 1.0
+            b = 1.0 - a
+        else:
+            # one smoothing factor per time constant for this interval (the EMAs below)
+            tau = cfg.speed_tau_s
+            a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
+            b = 1.0 - a
+            nis = kf.predict_update3(dt, e, n, u, r)
             if math.isfinite(nis):
-                obj.nis_mean = a * obj.nis_mean + b * min(nis, 100.0)
+                # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
+                obj.nis_mean = a * obj.nis_mean + b * (100.0 if nis > 100.0 else nis)
         vel = trk.vel_ned
         if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
             vn, ve, vd = vel
@@ -211,38 +227,56 @@ class ObjectTable:
         else:
             x = kf.x
             spd = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
-        if obj.n_reports == 0:
+        if n_reports == 0:
             obj.speed = spd
         else:
             obj.speed = a * obj.speed + b * spd
-            obj.up = a * obj.up + b * trk.u
-            rcs = trk.rcs_dbsm
+            obj.up = a * obj.up + b * u
             if rcs is not None and math.isfinite(rcs):
                 obj.rcs_mean = a * obj.rcs_mean + b * rcs
         p = trk.uav_prob
         if p is not None and math.isfinite(p):
+            # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
             c = cfg.class_clip
-            pc = min(max(p, 1e-6), 1.0 - 1e-6)
-            lg = max(-c, min(c, math.log(pc / (1.0 - pc))))
-            obj.class_logit = (
-                lg if obj.n_reports == 0 else _ema(obj.class_logit, lg, dt, cfg.class_tau_s)
-            )
-        sig = (trk.vel_ned, trk.rcs_dbsm)
-        obj.coasting = (
-            obj.signature is not None and trk.vel_ned is not None and sig == obj.signature
-        )
+            pc = 1e-6 if p < 1e-6 else p
+            if pc > 1.0 - 1e-6:
+                pc = 1.0 - 1e-6
+            lg = math.log(pc / (1.0 - pc))
+            if c < lg:
+                lg = c
+            if -c > lg:
+                lg = -c
+            if n_reports == 0:
+                obj.class_logit = lg
+            else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
+                tau = cfg.class_tau_s
+                if tau <= 0:
+                    obj.class_logit = lg
+                else:
+                    a = math.exp(-dt / tau) if dt > 0 else 1.0
+                    obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
+        sig = (vel, rcs)
+        old = obj.signature
+        obj.coasting = old is not None and vel is not None and sig == old
         obj.signature = sig
-        obj.n_reports += 1
+        obj.n_reports = n_reports + 1
         obj.last_t = t
         return obj
 
     def mark_fused(self, obj: RadarObject, inside: bool, t: float) -> None:
         """Record whether the object's report at ``t`` fell inside the UAV track's gate."""
         v = 1.0 if inside else 0.0
-        if obj.fused_t is None:
+        last = obj.fused_t
+        if last is None:
             obj.fused = v
-        else:
-            obj.fused = _ema(obj.fused, v, t - obj.fused_t, self.cfg.fused_tau_s)
+        else:  # _ema(obj.fused, v, t - last, fused_tau_s), inlined
+            tau = self.cfg.fused_tau_s
+            if tau <= 0:
+                obj.fused = v
+            else:
+                dt = t - last
+                a = math.exp(-dt / tau) if dt > 0 else 1.0
+                obj.fused = a * obj.fused + (1.0 - a) * v
         obj.fused_t = t
 
     def rf_fix(self, t: float, e: float, n: float, var_m2: float) -> int:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -86,15 +86,23 @@ class PolarRadarR:
     floor_m: float = 0.0
     low_el_gain: float = 0.0
     low_el_deg: float = 4.0
+    # (radar east, north, up, floor^2, sigma_range^2): read once per report
+    _consts: tuple[float, float, float, float, float] = field(
+        init=False, repr=False, compare=False
+    )
+
+    def __post_init__(self) -> None:
+        e0, n0, u0 = self.radar_enu
+        consts = (e0, n0, u0, self.floor_m * self.floor_m, self.sigma_range_m * self.sigma_range_m)
+        object.__setattr__(self, "_consts", consts)
 
     def r_at(self, e: float, n: float, u: float) -> PackedR:
-        de = e - self.radar_enu[0]
-        dn = n - self.radar_enu[1]
-        du = u - self.radar_enu[2]
+        ce, cn, cu, f2, sr2 = self._consts  # the radar's position, floor^2, sigma_range^2
+        de = e - ce
+        dn = n - cn
+        du = u - cu
         rho = math.hypot(de, dn)
         r = math.sqrt(rho * rho + du * du)
-        f2 = self.floor_m * self.floor_m
-        sr2 = self.sigma_range_m * self.sigma_range_m
         if r < 1e-6:
             v = sr2 + f2
             return (v, 0.0, 0.0, v, 0.0, v)

@@ -277,6 +277,149 @@ class CvKalman:
         ]
         return nis
 
+    def predict_update3(self, T: float, z0: float, z1: float, z2: float, r: PackedR) -> float:
+        """:meth:`predict` over ``T`` then :meth:`update3` (no gate) in one kernel: the same
+        floating-point operations in the same order, without building the predicted lists."""
+        (
+            h00, h01, h02, h03, h04, h05,
+            h11, h12, h13, h14, h15,
+            h22, h23, h24, h25,
+            p33, p34, p35,
+            p44, p45,
+            p55,
+        ) = self.P
+        x0, x1, x2, x3, x4, x5 = self.x
+        if T != 0.0:
+            # predict (see predict(): h = P's first three rows, p = the velocity block)
+            x0 = x0 + T * x3
+            x1 = x1 + T * x4
+            x2 = x2 + T * x5
+            qx, qy, qz = self.q
+            T2 = T * T
+            q3 = T2 * T / 3.0
+            q2 = 0.5 * T2
+            # position block first (it reads the old cross and velocity blocks) ...
+            h00 = h00 + (T * (h03 + h03) + T2 * p33 + qx * q3)
+            h01 = h01 + (T * (h04 + h13) + T2 * p34)
+            h02 = h02 + (T * (h05 + h23) + T2 * p35)
+            h11 = h11 + (T * (h14 + h14) + T2 * p44 + qy * q3)
+            h12 = h12 + (T * (h15 + h24) + T2 * p45)
+            h22 = h22 + (T * (h25 + h25) + T2 * p55 + qz * q3)
+            # ... then the cross block (it reads the old velocity block) ...
+            h03 = h03 + T * p33 + qx * q2
+            h04 = h04 + T * p34
+            h05 = h05 + T * p35
+            h13 = h13 + T * p34
+            h14 = h14 + T * p44 + qy * q2
+            h15 = h15 + T * p45
+            h23 = h23 + T * p35
+            h24 = h24 + T * p45
+            h25 = h25 + T * p55 + qz * q2
+            # ... then the velocity block
+            p33 = p33 + qx * T
+            p44 = p44 + qy * T
+            p55 = p55 + qz * T
+        r00, r01, r02, r11, r12, r22 = r
+        s00 = h00 + r00
+        s01 = h01 + r01
+        s02 = h02 + r02
+        s11 = h11 + r11
+        s12 = h12 + r12
+        s22 = h22 + r22
+        i00 = s11 * s22 - s12 * s12
+        i01 = s02 * s12 - s01 * s22
+        i02 = s01 * s12 - s02 * s11
+        d = 1.0 / (s00 * i00 + s01 * i01 + s02 * i02)
+        i00 *= d
+        i01 *= d
+        i02 *= d
+        i11 = (s00 * s22 - s02 * s02) * d
+        i12 = (s01 * s02 - s00 * s12) * d
+        i22 = (s00 * s11 - s01 * s01) * d
+        y0 = z0 - x0
+        y1 = z1 - x1
+        y2 = z2 - x2
+        u0 = i00 * y0 + i01 * y1 + i02 * y2
+        u1 = i01 * y0 + i11 * y1 + i12 * y2
+        u2 = i02 * y0 + i12 * y1 + i22 * y2
+        nis = y0 * u0 + y1 * u1 + y2 * u2
+        if not nis <= _INF:  # NaN: update3 leaves the predicted state
+            self.x = [x0, x1, x2, x3, x4, x5]
+            self.P = [
+                h00, h01, h02, h03, h04, h05, h11, h12, h13, h14, h15,
+                h22, h23, h24, h25, p33, p34, p35, p44, p45, p55,
+            ]  # fmt: skip
+            return nis
+        # x += (HP)^T S^-1 y
+        self.x = [
+            x0 + (h00 * u0 + h01 * u1 + h02 * u2),
+            x1 + (h01 * u0 + h11 * u1 + h12 * u2),
+            x2 + (h02 * u0 + h12 * u1 + h22 * u2),
+            x3 + (h03 * u0 + h13 * u1 + h23 * u2),
+            x4 + (h04 * u0 + h14 * u1 + h24 * u2),
+            x5 + (h05 * u0 + h15 * u1 + h25 * u2),
+        ]
+        # M = S^-1 S, J = 2 S^-1 - M S^-1: the Joseph form's middle factor
+        m00 = i00 * s00 + i01 * s01 + i02 * s02
+        m01 = i00 * s01 + i01 * s11 + i02 * s12
+        m02 = i00 * s02 + i01 * s12 + i02 * s22
+        m10 = i01 * s00 + i11 * s01 + i12 * s02
+        m11 = i01 * s01 + i11 * s11 + i12 * s12
+        m12 = i01 * s02 + i11 * s12 + i12 * s22
+        m20 = i02 * s00 + i12 * s01 + i22 * s02
+        m21 = i02 * s01 + i12 * s11 + i22 * s12
+        m22 = i02 * s02 + i12 * s12 + i22 * s22
+        j00 = 2.0 * i00 - (m00 * i00 + m01 * i01 + m02 * i02)
+        j01 = 2.0 * i01 - (m00 * i01 + m01 * i11 + m02 * i12)
+        j02 = 2.0 * i02 - (m00 * i02 + m01 * i12 + m02 * i22)
+        j11 = 2.0 * i11 - (m10 * i01 + m11 * i11 + m12 * i12)
+        j12 = 2.0 * i12 - (m10 * i02 + m11 * i12 + m12 * i22)
+        j22 = 2.0 * i22 - (m20 * i02 + m21 * i12 + m22 * i22)
+        # V = J (HP)
+        v00 = j00 * h00 + j01 * h01 + j02 * h02
+        v01 = j00 * h01 + j01 * h11 + j02 * h12
+        v02 = j00 * h02 + j01 * h12 + j02 * h22
+        v03 = j00 * h03 + j01 * h13 + j02 * h23
+        v04 = j00 * h04 + j01 * h14 + j02 * h24
+        v05 = j00 * h05 + j01 * h15 + j02 * h25
+        v10 = j01 * h00 + j11 * h01 + j12 * h02
+        v11 = j01 * h01 + j11 * h11 + j12 * h12
+        v12 = j01 * h02 + j11 * h12 + j12 * h22
+        v13 = j01 * h03 + j11 * h13 + j12 * h23
+        v14 = j01 * h04 + j11 * h14 + j12 * h24
+        v15 = j01 * h05 + j11 * h15 + j12 * h25
+        v20 = j02 * h00 + j12 * h01 + j22 * h02
+        v21 = j02 * h01 + j12 * h11 + j22 * h12
+        v22 = j02 * h02 + j12 * h12 + j22 * h22
+        v23 = j02 * h03 + j12 * h13 + j22 * h23
+        v24 = j02 * h04 + j12 * h14 + j22 * h24
+        v25 = j02 * h05 + j12 * h15 + j22 * h25
+        # P - (HP)^T V (upper triangle)
+        self.P = [
+            h00 - (h00 * v00 + h01 * v10 + h02 * v20),
+            h01 - (h00 * v01 + h01 * v11 + h02 * v21),
+            h02 - (h00 * v02 + h01 * v12 + h02 * v22),
+            h03 - (h00 * v03 + h01 * v13 + h02 * v23),
+            h04 - (h00 * v04 + h01 * v14 + h02 * v24),
+            h05 - (h00 * v05 + h01 * v15 + h02 * v25),
+            h11 - (h01 * v01 + h11 * v11 + h12 * v21),
+            h12 - (h01 * v02 + h11 * v12 + h12 * v22),
+            h13 - (h01 * v03 + h11 * v13 + h12 * v23),
+            h14 - (h01 * v04 + h11 * v14 + h12 * v24),
+            h15 - (h01 * v05 + h11 * v15 + h12 * v25),
+            h22 - (h02 * v02 + h12 * v12 + h22 * v22),
+            h23 - (h02 * v03 + h12 * v13 + h22 * v23),
+            h24 - (h02 * v04 + h12 * v14 + h22 * v24),
+            h25 - (h02 * v05 + h12 * v15 + h22 * v25),
+            p33 - (h03 * v03 + h13 * v13 + h23 * v23),
+            p34 - (h03 * v04 + h13 * v14 + h23 * v24),
+            p35 - (h03 * v05 + h13 * v15 + h23 * v25),
+            p44 - (h04 * v04 + h14 * v14 + h24 * v24),
+            p45 - (h04 * v05 + h14 * v15 + h24 * v25),
+            p55 - (h05 * v05 + h15 * v15 + h25 * v25),
+        ]
+        return nis
+
     # --- 2D position measurement (RF) ---------------------------------------------------
     def nis2(self, z0: float, z1: float, r: PackedR) -> float:
         """Normalised innovation squared of a 2D (east, north) position."""

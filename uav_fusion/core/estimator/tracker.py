@@ -82,6 +82,8 @@ FloatArray = npt.NDArray[np.float64]
 
 _pack = struct.Struct("27d").pack
 _NAN_STATE = _pack(*(math.nan,) * 27)
+# a filter's (x, P) lists with their packed bytes, mode probabilities and effective q
+_Packed = tuple[object, object, bytes, tuple[float, ...], tuple[float, float, float]]
 
 
 class TrackerStep(Step):
@@ -240,6 +242,8 @@ class Tracker:
         self._pending_reset: str | None = None
         self._seq = 0
         self.counters: dict[str, int] = {}
+        # (x, P, packed bytes, mode probabilities, effective q) of the last step's state
+        self._packed: _Packed = (None, None, b"", (), (0.0, 0.0, 0.0))
 
     # --- fixed-rate accessors -----------------------------------------------------------
     @property
@@ -297,18 +301,28 @@ class Tracker:
         f = self.filter
         if f is not None:
             x, p = f.mean()
-            state = _pack(*x, *p)
-            probs = f.mode_probabilities()
-            q = f.effective_q()
+            # the filters install new lists on every change, so the same two lists are the
+            # same state: pack it once for all the steps of a frame that leave it unchanged
+            # (the mode probabilities and the effective q change only with them too)
+            packed = self._packed
+            if x is packed[0] and p is packed[1]:
+                state, probs, q = packed[2], packed[3], packed[4]
+            else:
+                state = _pack(*x, *p)
+                probs = f.mode_probabilities()
+                q = f.effective_q()
+                self._packed = (x, p, state, probs, q)
         else:
             state = _NAN_STATE
             probs = ()
             q = (0.0, 0.0, 0.0)
         seq = self._seq
-        self._seq += 1
+        self._seq = seq + 1
         if status == DISCARDED:
-            self._count(DISCARDED)
-            self._count(f"rejected_{reason}")
+            c = self.counters
+            c[DISCARDED] = c.get(DISCARDED, 0) + 1
+            key = f"rejected_{reason}"
+            c[key] = c.get(key, 0) + 1
         return TrackerStep(
             t, source, status, reason, nis, state, len(z), track_id, seq, z, score, weight,
             probs, self.segment, q,
@@ -371,20 +385,26 @@ class Tracker:
         """One radar frame; returns one step per report, in the frame's order."""
         t = frame.t
         c = self.counters
-        out: list[TrackerStep | None] = [None] * len(frame.tracks)
+        tracks = frame.tracks
+        if tracks:
+            n = len(tracks)
+            c["measurements"] = c.get("measurements", 0) + n
+            c["radar_measurements"] = c.get("radar_measurements", 0) + n
+        out: list[TrackerStep | None] = [None] * len(tracks)
         objs: list[tuple[int, RadarTrack, RadarObject, PackedR]] = []
         r_at = self._r_obj.r_at
+        update = self.objects.update
         dv = self._extra_var
-        for i, trk in enumerate(frame.tracks):
-            c["measurements"] = c.get("measurements", 0) + 1
-            c["radar_measurements"] = c.get("radar_measurements", 0) + 1
-            z = (trk.e, trk.n, trk.u)
-            if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
+        isfinite = math.isfinite
+        for i, trk in enumerate(tracks):
+            e, n_, u = trk.e, trk.n, trk.u
+            if not isfinite(trk.t + e + n_ + u):
+                z = (e, n_, u)
                 out[i] = self._step(t, RADAR, DISCARDED, "invalid", None, z, trk.track_id)
                 continue
-            ro = r_at(trk.e, trk.n, trk.u)
+            ro = r_at(e, n_, u)
             r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
-            objs.append((i, trk, self.objects.update(trk, ro), r))
+            objs.append((i, trk, update(trk, ro), r))
         if not self._advance(t):
             for i, trk, _, _ in objs:
                 z = (trk.e, trk.n, trk.u)
@@ -393,17 +413,20 @@ class Tracker:
         cands: list[tuple[int, RadarTrack, RadarObject, float]] = []
         rs: dict[int, PackedR] = {}
         rx, ry, rz = self._radar_pos
+        gate2 = self._gate2
+        cfg = self.cfg
+        skip_coasts = cfg.skip_radar_coasts
         for i, trk, obj, r in objs:
             rs[i] = r
             d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
-            if d2 > self._gate2:
+            if d2 > gate2:
                 z = (trk.e, trk.n, trk.u)
                 out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, z, trk.track_id)
-            elif obj.coasting and self.cfg.skip_radar_coasts:
+            elif obj.coasting and skip_coasts:
                 z = (trk.e, trk.n, trk.u)
                 out[i] = self._step(t, RADAR, DISCARDED, "coast", None, z, trk.track_id)
             else:
-                cands.append((i, trk, obj, obj.score(self.cfg)))
+                cands.append((i, trk, obj, obj.score(cfg)))
         if cands:
             for i, step in self._radar_candidates(t, cands, rs):
                 out[i] = step
@@ -421,14 +444,17 @@ class Tracker:
         if f is not None:
             g = self._g3
             scored = []
+            # the CV filter's kernel directly (what CvFilter.nis calls for a 3D z)
+            nis3 = f.kf.nis3 if isinstance(f, CvFilter) else None
+            mark = self.objects.mark_fused if self.confirmed else None
+            fused_nis = cfg.fused_nis
             for i, trk, obj, s in cands:
                 z = (trk.e, trk.n, trk.u)
                 r = rs[i]
-                nis = f.nis(z, r)
-                ok = nis <= g
-                if self.confirmed:
-                    self.objects.mark_fused(obj, nis <= cfg.fused_nis, t)
-                scored.append((i, trk, obj, s, z, r, nis, ok))
+                nis = nis3(z[0], z[1], z[2], r) if nis3 is not None else f.nis(z, r)
+                if mark is not None:
+                    mark(obj, nis <= fused_nis, t)
+                scored.append((i, trk, obj, s, z, r, nis, nis <= g))
             if not self.confirmed:
                 # a tentative RF track: only an object strong enough to start a track may
                 # confirm it (inside its gate) or supersede it (_initiate)
