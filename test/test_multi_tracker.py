@@ -162,6 +162,61 @@ def test_a_uav_split_into_two_radar_tracks_gives_one_output(site: Site) -> None:
         assert len(near_a) == 1
 
 
+def test_a_wrong_emitter_link_is_undone_without_losing_the_track(site: Site) -> None:
+    """The silent UAV B's track takes a 5745 MHz fix from a UAV still on its pad nearby; the
+    next fixes of that emitter come from far away: B's track drops the emitter, is not
+    dropped, and the emitter gets a track of its own."""
+    sc = Crossing(site, seed=5)
+    pad = sc.b(20.0)[:2]  # where B is at t = 20 s
+    far = sc.r0[:2] + np.array([-1500.0, 1800.0])
+    stream: list[RadarFrame | RfAttempt] = []
+    k = 1000
+    for item in sc.stream(100.0):
+        stream.append(item)
+        tau = item.t - 1000.0
+        if isinstance(item, RadarFrame) and abs(tau - 20.0) < 1e-9:
+            stream.append(RfAttempt(item.t + 0.01, k, True, 0.0, 0.0, *map(float, pad), 8.0, 4, 4,
+                                    center_freq_hz=5745e6))  # fmt: skip
+            k += 1
+        elif isinstance(item, RadarFrame) and tau > 24.0 and int(tau * 4) % 16 == 0:
+            stream.append(RfAttempt(item.t + 0.01, k, True, 0.0, 0.0, *map(float, far), 8.0,
+                                    4, 4, center_freq_hz=5745e6))  # fmt: skip
+            k += 1
+    mt = MultiTracker(load_profile("tracker"), site)
+    epochs = run_multi(mt, stream, 1.0, 1000.0, 1099.0)
+    assert mt.counters.get("emitter_unlinked", 0) == 1
+    ids_b = {i for i in _ids_near(epochs, sc.b)[25:] if i is not None}
+    assert len(ids_b) == 1  # B's track lived on
+    last = {o.track_id: o for o in epochs[-1].tracks}
+    (tb,) = ids_b
+    assert last[tb].emitter is None
+    assert any(
+        o.emitter == emitter_key(5745e6) and np.hypot(*(o.x[:2] - far)) < 100.0
+        for o in epochs[-1].tracks
+    )
+
+
+def test_a_track_without_measurements_stops_being_output_but_keeps_its_id(site: Site) -> None:
+    """UAV B's reports stop for 10 s (> output_coast_s, < max_coast_s): no output for B in
+    the gap, then B comes back with the same id."""
+    sc = Crossing(site, seed=6)
+    stream: list[RadarFrame | RfAttempt] = []
+    for item in sc.stream(100.0):
+        if isinstance(item, RadarFrame) and 1060.0 <= item.t < 1070.0:
+            item = RadarFrame(item.t, tuple(r for r in item.tracks if r.track_id != 20))
+        stream.append(item)
+    mt = MultiTracker(load_profile("tracker"), site)
+    coast = mt.settings.output_coast_s
+    assert coast is not None and coast < 10.0 < (mt.profile.max_coast_s or math.inf)
+    epochs = run_multi(mt, stream, 1.0, 1000.0, 1099.0)
+    ids_b = _ids_near(epochs, sc.b, within=100.0)
+    before = {i for i in ids_b[40:60] if i is not None}
+    after = {i for i in ids_b[72:] if i is not None}
+    assert len(before) == 1 and after == before
+    gap = ids_b[int(60 + coast) + 1 : 70]
+    assert gap and all(i is None for i in gap)
+
+
 def test_run_writes_every_target_and_scores_them(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

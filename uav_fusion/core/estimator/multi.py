@@ -32,10 +32,17 @@ Per radar frame (one time for all reports):
 
 An RF fix (``ok`` attempts) first credits the radar objects it agrees with. It belongs to its
 emitter, keyed by centre frequency: a track that has an emitter takes only that emitter's
-fixes (inside its gate: update; outside: a rejection); a fix of an emitter no track has yet
+fixes (inside its gate: update; outside: a rejection, except for a track the radar feeds,
+which loses the emitter after ``emitter_unlink_misses`` such fixes in a row: the link was
+wrong, e.g. made from a fix of a UAV still on its pad); a fix of an emitter no track has yet
 goes to the nearest track without an emitter whose gate it falls in, which then carries that
 emitter; otherwise it starts a tentative track of that emitter, confirmed by M of N fixes as
 in the single-UAV tracker. A fix without a frequency is one emitter of its own ("unknown").
+
+The grid output (:class:`MultiGrid`) holds a confirmed track while its last accepted
+measurement is at most ``output_coast_s`` old (5 s; the track itself lives until the
+profile's ``max_coast_s``, so a UAV found again keeps its id): a track whose radar object has
+gone stops being published before it drifts away as a false track.
 
 A track's UAV probability is the logistic of the UAV score of the radar object it last took
 (0.5 without one), raised for a track with an emitter: ``1 - (1 - p) * emitter_doubt``
@@ -92,6 +99,13 @@ class MultiSettings:
     continuity_bonus: float = 0.0  # NIS credit for the radar object a track took last
     velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
     velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
+    #: a confirmed track is output while its last accepted measurement is at most this old
+    #: (None: the profile's max_coast_s, which only decides when the track is dropped)
+    output_coast_s: float | None = 5.0
+    #: a track's emitter is taken from it after this many of the emitter's fixes in a row
+    #: fell outside its gate (the link was wrong, or the UAV flew out of the fixes' reach);
+    #: None: never (each such fix is a rejection of the track)
+    emitter_unlink_misses: int | None = 2
 
 
 class UavTrack:
@@ -102,6 +116,7 @@ class UavTrack:
         "close_since",
         "confirmed",
         "emitter",
+        "emitter_misses",
         "filter",
         "followed",
         "id",
@@ -124,6 +139,7 @@ class UavTrack:
         self.last_radar_t: float | None = None
         self.followed: int | None = None
         self.emitter: str | None = None
+        self.emitter_misses = 0
         self.mofn: MofN | None = None
         self.n_updates = 1
         self.rejections = 0
@@ -401,6 +417,7 @@ class MultiTracker:
         if free:
             _, _, tr = min(free, key=lambda e: (e[0], e[1]))
             tr.emitter = em
+            tr.emitter_misses = 0
             self._count("emitter_linked")
             self._rf_to(tr, t, z, r)
             return
@@ -438,8 +455,19 @@ class MultiTracker:
             elif state == "failed":
                 self._drop(tr, "unconfirmed")
             return
-        if not hit:
-            self._reject(tr)
+        if hit:
+            tr.emitter_misses = 0
+            return
+        limit = self.settings.emitter_unlink_misses
+        if limit is not None and tr.emitter is not None and tr.last_radar_t is not None:
+            # a radar-fed track whose emitter's fixes keep missing it: the link is wrong
+            tr.emitter_misses += 1
+            if tr.emitter_misses >= limit:
+                tr.emitter = None
+                tr.emitter_misses = 0
+                self._count("emitter_unlinked")
+            return
+        self._reject(tr)
 
 
 @dataclass(frozen=True)
@@ -455,8 +483,8 @@ class MultiGrid:
     passes it (the same for a live node and an offline run): call :meth:`before` with an
     item's time before feeding the item to the tracker, :meth:`advance` when everything up to
     a time has been processed. Each track is predicted to the epoch, while its last accepted
-    measurement is at most the profile's ``max_coast_s`` old. No epoch before ``t0`` (default:
-    the first time seen) or after ``t1``."""
+    measurement is at most ``output_coast_s`` old (the profile's ``max_coast_s`` when None).
+    No epoch before ``t0`` (default: the first time seen) or after ``t1``."""
 
     def __init__(
         self,
@@ -471,7 +499,8 @@ class MultiGrid:
         self.frequency_hz = float(frequency_hz)
         self._k: int | None = None if t0 is None else self.first_epoch(float(t0))
         self._t1 = math.inf if t1 is None else float(t1)
-        self.max_coast_s = tracker.profile.max_coast_s
+        out_coast = tracker.settings.output_coast_s
+        self.max_coast_s = tracker.profile.max_coast_s if out_coast is None else out_coast
 
     def epoch_time(self, k: int) -> float:
         return k / self.frequency_hz
