@@ -27,6 +27,7 @@ from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
 HELP = "run the live node graph on the default flight and write the evaluation to out/demo/"
 MULTI_PLAN = "multi_crossing_pair"
+DEFAULT_OUT = "out/demo"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,7 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--flight",
         help="flight folder in the Dataset-28 layout (default: the bundled default flight)",
     )
-    parser.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
+    parser.add_argument(
+        "--out",
+        default=DEFAULT_OUT,
+        help=f"report folder (default: {DEFAULT_OUT}; with --multi {DEFAULT_OUT}/multi)",
+    )
     parser.add_argument(
         "--rate",
         type=float,
@@ -139,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     if args.multi:
         if args.bag:
             raise ConfigError("--multi replays a flight folder; it does not go with --bag")
+        if args.out == DEFAULT_OUT:  # beside the single-UAV demo's report, not over it
+            out = out / "multi"
         return _run_multi(args, out)
     if args.bag:
         return _run_bag(args, flight_dir, out)
