@@ -72,6 +72,8 @@ FloatArray = npt.NDArray[np.float64]
 #: Emitter key of RF fixes without a centre frequency.
 UNKNOWN_EMITTER = "unknown"
 _FORBIDDEN = 1.0e9
+# a radar report that may update a track: the report, its object, the object's UAV score, R
+_Cand = tuple[RadarTrack, RadarObject, float, PackedR]
 
 
 def emitter_key(freq_hz: float | None) -> str:
@@ -92,6 +94,14 @@ class MultiSettings:
     continuity_bonus: float = 0.0  # NIS credit for the radar object a track took last
     velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
     velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
+    output_coast_s: float | None = 3.0  # published while the last update is this recent
+    radar_output_s: float | None = 3.0  # inside radar cover: ... and the last radar update
+    emitter_misses: int | None = 3  # this many fixes of its emitter in a row outside a
+    # track's gate unlink the emitter from it (None: never)
+    tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
+    merge_keeps_live: bool = True  # a merge keeps the recently updated track over the older
+    birth_sep_m: float | None = 25.0  # a strong object inside a track's gate starts a track
+    # when that track took another report of the frame this far away (None: never)
 
 
 class UavTrack:
@@ -102,6 +112,7 @@ class UavTrack:
         "close_since",
         "confirmed",
         "emitter",
+        "emitter_misses",
         "filter",
         "followed",
         "id",
@@ -124,6 +135,7 @@ class UavTrack:
         self.last_radar_t: float | None = None
         self.followed: int | None = None
         self.emitter: str | None = None
+        self.emitter_misses = 0
         self.mofn: MofN | None = None
         self.n_updates = 1
         self.rejections = 0
@@ -197,6 +209,8 @@ class MultiTracker:
                 f.predict(t - tr.t)
                 at = t
             x, p = f.mean()
+            if not self._published(tr, at, x):
+                continue
             out.append(
                 TrackOutput(
                     tr.id, at, np.array(x, dtype=float), expand_upper(p), self.uav_prob(tr),
@@ -205,6 +219,22 @@ class MultiTracker:
             )  # fmt: skip
         out.sort(key=lambda o: (-o.uav_prob, o.track_id))
         return out
+
+    def _published(self, tr: UavTrack, t: float, x: list[float]) -> bool:
+        """Whether a confirmed track at ``t`` (position ``x``) is output: its last update at
+        most ``output_coast_s`` old and, inside the radar's range gate, its last radar update
+        at most ``radar_output_s`` old (an emitter inside radar cover that the radar does not
+        see is on the ground: a UAV on its pad with its link on, or one that has landed)."""
+        st = self.settings
+        if st.output_coast_s is not None and t - tr.last_update_t > st.output_coast_s:
+            return False
+        if st.radar_output_s is None:
+            return True
+        if tr.last_radar_t is not None and t - tr.last_radar_t <= st.radar_output_s:
+            return True
+        rx, ry, rz = self._radar_pos
+        d2 = (x[0] - rx) ** 2 + (x[1] - ry) ** 2 + (x[2] - rz) ** 2
+        return d2 > self._gate2
 
     # --- track life ------------------------------------------------------------------------
     def _new_track(self, t: float, x: list[float], P: FloatArray, confirmed: bool) -> UavTrack:
@@ -249,7 +279,7 @@ class MultiTracker:
         cfg = self.cfg
         dv = self._extra_var
         rx, ry, rz = self._radar_pos
-        cands: list[tuple[RadarTrack, RadarObject, float, PackedR]] = []
+        cands: list[_Cand] = []
         for trk in frame.tracks:
             self._count("radar_reports")
             if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
@@ -265,12 +295,14 @@ class MultiTracker:
             if s >= cfg.follow_min:
                 cands.append((trk, obj, s, r))
         self._advance(t)
-        live = [tr for tr in self.tracks if tr.t <= t]
+        take_tentative = self.settings.tentative_takes_radar
+        live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
         nis = np.full((len(live), len(cands)), math.inf)
         for a, tr in enumerate(live):
             for b, (trk, _obj, _s, r) in enumerate(cands):
                 nis[a, b] = tr.filter.nis((trk.e, trk.n, trk.u), r)
         taken: set[int] = set()
+        took: dict[int, int] = {}  # live track index -> the candidate it took
         if live and cands:
             # NIS, less a bonus for the object the track followed last; the UAV score only
             # decides who may update a track (follow_min): between two UAVs it says nothing
@@ -304,6 +336,7 @@ class MultiTracker:
                 tr.last_radar_t = t
                 tr.score = s
                 taken.add(b)
+                took[a] = b
         # a confirmed track whose own object reported outside its gate: a rejection
         for a, tr in enumerate(live):
             if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
@@ -321,7 +354,10 @@ class MultiTracker:
                 continue
             if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
                 continue
-            if any(nis[a, b] <= self._g3 for a in range(len(live))):
+            if any(
+                nis[a, b] <= self._g3 and not self._apart(a, b, took, cands)
+                for a in range(len(live))
+            ):
                 continue
             kf = obj.kf
             assert kf is not None
@@ -330,6 +366,18 @@ class MultiTracker:
             tr.last_radar_t = t
             tr.score = s
         self._merge(t)
+
+    def _apart(self, a: int, b: int, took: dict[int, int], cands: list[_Cand]) -> bool:
+        """Whether candidate ``b``, inside live track ``a``'s gate, is another UAV than the
+        one ``a`` follows: ``a`` took another report of this frame, more than ``birth_sep_m``
+        away horizontally (two radar tracks reporting in the same frame, neither coasting,
+        follow two objects; one UAV split into two radar tracks gives nearby reports)."""
+        sep = self.settings.birth_sep_m
+        c = took.get(a)
+        if sep is None or c is None:
+            return False
+        za, zb = cands[c][0], cands[b][0]
+        return (za.e - zb.e) ** 2 + (za.n - zb.n) ** 2 > sep * sep
 
     def _merge(self, t: float) -> None:
         conf = [tr for tr in self.tracks if tr.confirmed]
@@ -363,8 +411,18 @@ class MultiTracker:
                     and a.followed != b.followed
                 ):
                     continue  # two objects side by side: two UAVs
-                # keep the older track; it inherits the younger one's emitter
+                # keep the older track; it inherits the younger one's emitter. With
+                # merge_keeps_live, a track updated within merge_s is kept over one that is
+                # not (a coasting track that lost its UAV drifting onto another UAV's track),
+                # and a coasting track's emitter is not inherited.
                 keep, lose = (a, b) if (a.born_t, a.id) <= (b.born_t, b.id) else (b, a)
+                if st.merge_keeps_live:
+                    la = t - a.last_update_t <= st.merge_s
+                    lb = t - b.last_update_t <= st.merge_s
+                    if la != lb:
+                        keep, lose = (a, b) if la else (b, a)
+                    if t - lose.last_update_t > st.merge_s:
+                        lose.emitter = None
                 if keep.emitter is None:
                     keep.emitter = lose.emitter
                 self._drop(lose, "merged")
@@ -388,7 +446,10 @@ class MultiTracker:
         self._advance(t)
         em = emitter_key(att.center_freq_hz)
         own = [tr for tr in self.tracks if tr.emitter == em and tr.t <= t]
-        if own:
+        tentative_only = not self.settings.tentative_takes_radar and all(
+            not tr.confirmed for tr in own
+        )
+        if own and not tentative_only:
             tr = min(own, key=lambda x: (not x.confirmed, x.id))
             self._rf_to(tr, t, z, r)
             return
@@ -402,7 +463,12 @@ class MultiTracker:
             _, _, tr = min(free, key=lambda e: (e[0], e[1]))
             tr.emitter = em
             self._count("emitter_linked")
+            for o in own:  # the emitter's tentative track: the confirmed track took over
+                self._drop(o, "emitter_linked")
             self._rf_to(tr, t, z, r)
+            return
+        if own:
+            self._rf_to(min(own, key=lambda x: x.id), t, z, r)
             return
         p = self.profile
         P = np.zeros((6, 6))
@@ -438,8 +504,18 @@ class MultiTracker:
             elif state == "failed":
                 self._drop(tr, "unconfirmed")
             return
-        if not hit:
-            self._reject(tr)
+        if hit:
+            tr.emitter_misses = 0
+            return
+        tr.emitter_misses += 1
+        n_miss = self.settings.emitter_misses
+        if n_miss is not None and tr.emitter_misses >= n_miss:
+            # its emitter is elsewhere: the track took another UAV (or the emitter is a UAV
+            # on the ground); the emitter's next fix links anew
+            tr.emitter = None
+            tr.emitter_misses = 0
+            self._count("emitter_unlinked")
+        self._reject(tr)
 
 
 @dataclass(frozen=True)
