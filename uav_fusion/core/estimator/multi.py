@@ -73,7 +73,8 @@ FloatArray = npt.NDArray[np.float64]
 UNKNOWN_EMITTER = "unknown"
 _FORBIDDEN = 1.0e9
 # a radar report that may update a track: the report, its object, the object's UAV score, R
-_Cand = tuple[RadarTrack, RadarObject, float, PackedR]
+# and the measurement (e, n, u; or e, n for a report below the ground: ``flat_below_ground``)
+_Cand = tuple[RadarTrack, RadarObject, float, PackedR, tuple[float, ...]]
 
 
 def emitter_key(freq_hz: float | None) -> str:
@@ -100,6 +101,7 @@ class MultiSettings:
     # track's gate unlink the emitter from it (None: never)
     tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
     merge_keeps_live: bool = True  # a merge keeps the recently updated track over the older
+    flat_below_ground: bool = True  # a report below the ground updates east / north only
     birth_sep_m: float | None = 25.0  # a strong object inside a track's gate starts a track
     # when that track took another report of the frame this far away (None: never)
 
@@ -280,6 +282,7 @@ class MultiTracker:
         dv = self._extra_var
         rx, ry, rz = self._radar_pos
         cands: list[_Cand] = []
+        flat = self.settings.flat_below_ground
         for trk in frame.tracks:
             self._count("radar_reports")
             if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
@@ -292,15 +295,24 @@ class MultiTracker:
             if d2 > self._gate2 or (obj.coasting and cfg.skip_radar_coasts):
                 continue
             s = obj.score(cfg)
+            z: tuple[float, ...] = (trk.e, trk.n, trk.u)
+            if flat and trk.u < -cfg.below_ground_m:
+                # the elevation of a low target is the radar's weak point (ground multipath):
+                # range and azimuth still place it; its object without the below-ground term
+                if obj.up < -cfg.below_ground_m:
+                    s += cfg.below_ground_weight
+                z, r = (trk.e, trk.n), (r[0], r[1], r[3])
             if s >= cfg.follow_min:
-                cands.append((trk, obj, s, r))
+                cands.append((trk, obj, s, r, z))
         self._advance(t)
         take_tentative = self.settings.tentative_takes_radar
         live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
         nis = np.full((len(live), len(cands)), math.inf)
         for a, tr in enumerate(live):
-            for b, (trk, _obj, _s, r) in enumerate(cands):
-                nis[a, b] = tr.filter.nis((trk.e, trk.n, trk.u), r)
+            for b, c in enumerate(cands):
+                # a 2D report's NIS on the 3D gate's scale
+                n = tr.filter.nis(c[4], c[3])
+                nis[a, b] = n if len(c[4]) == 3 else n * self._g3 / self._g2
         taken: set[int] = set()
         took: dict[int, int] = {}  # live track index -> the candidate it took
         if live and cands:
@@ -324,9 +336,13 @@ class MultiTracker:
                 if cost[a, b] >= _FORBIDDEN:
                     continue
                 tr = live[a]
-                trk, obj, s, r = cands[b]
-                w = self.robust.weight(float(nis[a, b]), 3)
-                tr.filter.update((trk.e, trk.n, trk.u), scale_packed(r, 1.0 / w) if w != 1.0 else r)
+                trk, obj, s, r, z = cands[b]
+                dof = len(z)
+                n = float(nis[a, b]) if dof == 3 else float(nis[a, b]) * self._g2 / self._g3
+                w = self.robust.weight(n, dof)
+                if dof == 2:
+                    self._hold_height(tr)
+                tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
                 self._accept(tr, t)
                 if not tr.confirmed:
                     tr.confirmed = True
@@ -341,16 +357,18 @@ class MultiTracker:
         for a, tr in enumerate(live):
             if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
                 continue
-            for b, (trk, _obj, _s, _r) in enumerate(cands):
-                if trk.track_id == tr.followed and nis[a, b] > self._g3:
+            for b, c in enumerate(cands):
+                if c[0].track_id == tr.followed and nis[a, b] > self._g3:
                     self._reject(tr)
                     break
         # strong objects that no track explains start tracks
         birth_age = self.settings.birth_age_s
         if birth_age is None:
             birth_age = cfg.stationary_min_age_s
-        for b, (trk, obj, s, _r) in enumerate(cands):
+        for b, (trk, obj, s, _r, z) in enumerate(cands):
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
+                continue
+            if len(z) != 3:
                 continue
             if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
                 continue
@@ -378,6 +396,17 @@ class MultiTracker:
             return False
         za, zb = cands[c][0], cands[b][0]
         return (za.e - zb.e) ** 2 + (za.n - zb.n) ** 2 > sep * sep
+
+    def _hold_height(self, tr: UavTrack) -> None:
+        """Before an update without height: hold the climb rate near 0 and keep the track
+        above the ground (soft: a pseudo-measurement at ground level when it is below)."""
+        p = self.profile
+        sd = p.vz_hold_sigma_mps
+        f = tr.filter
+        f.update_scalar(5, 0.0, sd * sd)
+        x, _ = f.mean()
+        if x[2] < -self.cfg.below_ground_m:
+            f.update_scalar(2, 0.0, self.cfg.below_ground_m**2)
 
     def _merge(self, t: float) -> None:
         conf = [tr for tr in self.tracks if tr.confirmed]
