@@ -6,6 +6,8 @@ from __future__ import annotations
 import csv
 import itertools
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +16,9 @@ import pytest
 from uav_fusion.core.estimator import load_profile
 from uav_fusion.core.estimator.multi import (
     UNKNOWN_EMITTER,
+    GridEpoch,
     MultiTracker,
+    TrackOutput,
     emitter_key,
     run_multi,
 )
@@ -233,3 +237,202 @@ def test_run_writes_every_target_and_scores_them(
     assert "GOSPA (p 2, c 100 m, alpha 2) mean" in text and "uav1: coverage" in text
     assert main(["run", "--profile", "paper", "--targets", str(out)]) == 2
     assert "--targets needs a tracker profile" in capsys.readouterr().err
+
+
+# --- scenes of the multi-UAV benchmark's failure cases ------------------------------------
+
+Path3 = Callable[[float], np.ndarray]
+
+
+@dataclass
+class Uav:
+    """One UAV of a scene: its path (ENU about the radar, a function of time from the scene's
+    start), the radar track id reporting it and when (``seen``), and its control link."""
+
+    path: Path3
+    radar_id: int
+    seen: Callable[[float], bool] = lambda tau: True
+    freq_hz: float | None = None  # link on 4 s fixes (all the time: on the pad too)
+    below_ground: Callable[[float], bool] = lambda tau: False  # reports mirrored under ground
+
+
+def scene_stream(
+    site: Site, uavs: list[Uav], duration_s: float, seed: int = 0
+) -> list[RadarFrame | RfAttempt]:
+    """Radar frames at 4 Hz (4 m noise, UAV class probability 0.8) and RF fixes every 4 s
+    (6 m noise, CEP 8 m) of ``uavs``, from t = 1000 s."""
+    rng = np.random.default_rng(seed)
+    r0 = np.array(site.radar.enu, dtype=float)
+    items: list[tuple[float, int, RadarFrame | RfAttempt]] = []
+    for k in range(int(duration_s * 4)):
+        t = 1000.0 + 0.25 * k
+        tau = t - 1000.0
+        reps = []
+        for u in uavs:
+            if not u.seen(tau):
+                continue
+            p = r0 + u.path(tau) + rng.normal(0.0, 4.0, 3)
+            if u.below_ground(tau):
+                p[2] = -30.0
+            v = (u.path(tau + 0.5) - u.path(tau - 0.5)).astype(float)
+            ned = (float(v[1]), float(v[0]), float(-v[2]))
+            rcs = round(-10.0 + float(rng.normal(0.0, 2.0)), 3)
+            reps.append(
+                RadarTrack(t, u.radar_id, 0.0, 0.0, 0.0, *map(float, p), ned, 0.8, None, rcs)
+            )
+        items.append((t, 0, RadarFrame(t, tuple(reps))))
+        for i, u in enumerate(uavs):
+            if u.freq_hz is not None and k % 16 == 4 * i + 2:
+                e, n = (r0 + u.path(tau))[:2] + rng.normal(0.0, 6.0, 2)
+                att = RfAttempt(
+                    t + 0.05, k, True, 0.0, 0.0, float(e), float(n), 8.0, 4, 4,
+                    center_freq_hz=u.freq_hz,
+                )  # fmt: skip
+                items.append((t + 0.05, 1, att))
+    items.sort(key=lambda x: (x[0], x[1]))
+    return [x[2] for x in items]
+
+
+def _near(site: Site, ep: GridEpoch, path: Path3, within: float = 60.0) -> list[TrackOutput]:
+    p = np.array(site.radar.enu, dtype=float) + path(ep.t - 1000.0)
+    return [o for o in ep.tracks if np.linalg.norm(o.x[:3] - p) < within]
+
+
+def _flight(start: np.ndarray, takeoff_s: float, v: np.ndarray, climb_mps: float = 5.0) -> Path3:
+    """On the ground at ``start`` until ``takeoff_s``, climbs to 40 m, then flies at ``v``."""
+    t_climb = 40.0 / climb_mps
+
+    def path(tau: float) -> np.ndarray:
+        if tau <= takeoff_s:
+            return start.copy()
+        dt = tau - takeoff_s
+        if dt <= t_climb:
+            return start + np.array([0.0, 0.0, climb_mps * dt])
+        return start + np.array([0.0, 0.0, 40.0]) + v * (dt - t_climb)
+
+    return path
+
+
+def test_a_uav_on_its_pad_with_its_link_on_is_no_target_until_the_radar_sees_it(
+    site: Site,
+) -> None:
+    """Inside radar cover an emitter the radar does not see is on the ground: its RF track
+    is not published; once airborne and seen, the UAV is one track carrying its emitter."""
+    path = _flight(np.array([-200.0, 300.0, 0.0]), 60.0, np.array([8.0, 0.0, 0.0]))
+    uav = Uav(path, 10, seen=lambda tau: tau >= 62.0, freq_hz=FREQ_A)
+    epochs = run_multi(
+        MultiTracker(load_profile("tracker"), site), scene_stream(site, [uav], 140.0, 5),
+        1.0, 1000.0, 1139.0,
+    )  # fmt: skip
+    assert all(not ep.tracks for ep in epochs[:62])
+    late = epochs[85:]
+    assert all(len(ep.tracks) == 1 and _near(site, ep, path) for ep in late)
+    assert len({ep.tracks[0].track_id for ep in late}) == 1
+    assert late[-1].tracks[0].emitter == emitter_key(FREQ_A)
+
+
+def test_a_grounded_emitter_does_not_take_over_another_uavs_radar_track(site: Site) -> None:
+    """A UAV on its pad with its link on, and a silent UAV taking off 150 m away: the silent
+    UAV's track carries no emitter, and nothing is published on the pad."""
+    pad = np.array([-200.0, 300.0, 0.0])
+    grounded = Uav(lambda tau: pad.copy(), 30, seen=lambda tau: False, freq_hz=5745e6)
+    b_path = _flight(pad + np.array([100.0, 0.0, 0.0]), 3.0, np.array([0.0, 8.0, 0.0]))
+    silent = Uav(b_path, 40)
+    epochs = run_multi(
+        MultiTracker(load_profile("tracker"), site),
+        scene_stream(site, [grounded, silent], 90.0, 6), 1.0, 1000.0, 1089.0,
+    )  # fmt: skip
+    late = epochs[30:]
+    assert all(len(ep.tracks) == 1 and _near(site, ep, b_path) for ep in late)
+    assert {o.emitter for ep in epochs for o in ep.tracks} == {None}
+    assert len({ep.tracks[0].track_id for ep in late}) == 1
+
+
+def test_two_uavs_side_by_side_from_take_off_get_two_tracks(site: Site) -> None:
+    """Two silent UAVs take off 60 m apart, 10 s after each other, and fly north side by
+    side: the second inside the first's gate, two radar tracks reporting in every frame; two
+    tracks, one each."""
+    v = np.array([0.0, 8.0, 0.0])
+    a_path = _flight(np.array([-100.0, 200.0, 0.0]), 5.0, v)
+    b_path = _flight(np.array([-160.0, 200.0, 0.0]), 15.0, v)
+    epochs = run_multi(
+        MultiTracker(load_profile("tracker"), site),
+        scene_stream(site, [Uav(a_path, 11), Uav(b_path, 12)], 70.0, 7), 1.0, 1000.0, 1069.0,
+    )  # fmt: skip
+    late = epochs[40:]
+    ids_a = [
+        min(_near(site, ep, a_path, 30.0), key=lambda o: o.track_id, default=None) for ep in late
+    ]
+    ids_b = [
+        min(_near(site, ep, b_path, 30.0), key=lambda o: o.track_id, default=None) for ep in late
+    ]
+    assert sum(o is not None for o in ids_a) >= 0.9 * len(late)
+    assert sum(o is not None for o in ids_b) >= 0.9 * len(late)
+    a_ids = {o.track_id for o in ids_a if o is not None}
+    b_ids = {o.track_id for o in ids_b if o is not None}
+    assert len(a_ids) == 1 and len(b_ids) == 1 and a_ids != b_ids
+    assert max(len(ep.tracks) for ep in late) == 2
+
+
+def test_a_track_that_lost_its_uav_is_not_published_and_a_merge_keeps_the_live_track(
+    site: Site,
+) -> None:
+    """UAV A (with a link) is lost by the radar and its link stops at t = 40 s; its track
+    coasts onto silent UAV B, 50 m behind on the same line. The lost track is no longer
+    published within a few seconds, and B keeps its own id and gets no emitter."""
+    v = np.array([8.0, 0.0, 0.0])
+    a_path = _flight(np.array([-150.0, 250.0, 0.0]), 0.0, v)
+    b_path = _flight(np.array([-200.0, 250.0, 0.0]), 0.0, v)
+    a = Uav(a_path, 21, seen=lambda tau: tau < 40.0, freq_hz=FREQ_A)
+    stream = [
+        item for item in scene_stream(site, [a, Uav(b_path, 22)], 90.0, 8)
+        if not (isinstance(item, RfAttempt) and item.t >= 1040.0)
+    ]  # fmt: skip
+    epochs = run_multi(MultiTracker(load_profile("tracker"), site), stream, 1.0, 1000.0, 1089.0)
+    assert all(len(ep.tracks) == 1 for ep in epochs[45:])  # A's track: gone from the output
+    near_b = [_near(site, ep, b_path, 30.0) for ep in epochs[30:]]
+    ids_b = [o.track_id for near in near_b for o in near]
+    assert len(ids_b) == len(near_b) and len(set(ids_b)) == 1
+    assert epochs[-1].tracks[0].emitter is None
+
+
+def test_reports_below_the_ground_still_place_the_uav(site: Site) -> None:
+    """For 20 s the radar puts the UAV 30 m under the ground (its elevation at a low angle):
+    the track follows it on east / north, stays published and keeps a sane height."""
+    path = _flight(np.array([-100.0, 250.0, 0.0]), 0.0, np.array([6.0, 0.0, 0.0]))
+    uav = Uav(path, 31, below_ground=lambda tau: 40.0 <= tau < 60.0)
+    epochs = run_multi(
+        MultiTracker(load_profile("tracker"), site), scene_stream(site, [uav], 80.0, 9),
+        1.0, 1000.0, 1079.0,
+    )  # fmt: skip
+    r0 = np.array(site.radar.enu, dtype=float)
+    for ep in epochs[40:80]:
+        assert len(ep.tracks) == 1
+        o = ep.tracks[0]
+        p = r0 + path(ep.t - 1000.0)
+        assert np.linalg.norm(o.x[:2] - p[:2]) < 30.0
+        assert o.x[2] > r0[2] - 20.0
+
+
+def test_an_emitter_whose_fixes_keep_missing_its_track_moves_to_the_right_one(
+    site: Site,
+) -> None:
+    """UAV A's link comes on at t = 20 s, 40 m beside silent UAV B, before the radar sees A:
+    its first fix links it to B's track. A then turns away; its fixes miss B's track, which
+    lets the emitter go, and it ends on A's own track once the radar sees A."""
+    b_path = _flight(np.array([-100.0, 200.0, 0.0]), 0.0, np.array([0.0, 8.0, 0.0]))
+
+    def a_path(tau: float) -> np.ndarray:
+        p = b_path(min(tau, 22.0)) + np.array([40.0, 0.0, 0.0])
+        return p + np.array([8.0, 0.0, 0.0]) * max(0.0, tau - 22.0)
+
+    a = Uav(a_path, 51, seen=lambda tau: tau >= 40.0, freq_hz=FREQ_A)
+    stream = [
+        item for item in scene_stream(site, [a, Uav(b_path, 52)], 100.0, 10)
+        if not (isinstance(item, RfAttempt) and item.t < 1020.0)
+    ]  # fmt: skip
+    epochs = run_multi(MultiTracker(load_profile("tracker"), site), stream, 1.0, 1000.0, 1099.0)
+    last = epochs[-1]
+    (on_a,) = _near(site, last, a_path)
+    (on_b,) = _near(site, last, b_path)
+    assert on_a.emitter == emitter_key(FREQ_A) and on_b.emitter is None

@@ -32,17 +32,20 @@ Per radar frame (one time for all reports):
 
 An RF fix (``ok`` attempts) first credits the radar objects it agrees with. It belongs to its
 emitter, keyed by centre frequency: a track that has an emitter takes only that emitter's
-fixes (inside its gate: update; outside: a rejection, except for a track the radar feeds,
-which loses the emitter after ``emitter_unlink_misses`` such fixes in a row: the link was
-wrong, e.g. made from a fix of a UAV still on its pad); a fix of an emitter no track has yet
+fixes (inside its gate: update; outside: a rejection, and after ``emitter_misses`` such
+fixes in a row the track loses the emitter: the link was wrong, e.g. made from a fix of a UAV
+still on its pad, and the emitter's next fix links anew); a fix of an emitter no track has yet
 goes to the nearest track without an emitter whose gate it falls in, which then carries that
 emitter; otherwise it starts a tentative track of that emitter, confirmed by M of N fixes as
 in the single-UAV tracker. A fix without a frequency is one emitter of its own ("unknown").
 
-The grid output (:class:`MultiGrid`) holds a confirmed track while its last accepted
-measurement is at most ``output_coast_s`` old (5 s; the track itself lives until the
-profile's ``max_coast_s``, so a UAV found again keeps its id): a track whose radar object has
-gone stops being published before it drifts away as a false track.
+The output (:meth:`MultiTracker.outputs`, and so :class:`MultiGrid`) holds a confirmed track
+while its last accepted measurement is at most ``output_coast_s`` old and, inside the radar's
+range gate, its last radar update at most ``radar_output_s`` old (3 s each; the track itself
+lives until the profile's ``max_coast_s``, so a UAV found again keeps its id): a track whose
+radar object has gone stops being published before it drifts away as a false track, and an
+emitter the radar does not see inside its cover (a UAV on its pad with its link on) is not
+published.
 
 A track's UAV probability is the logistic of the UAV score of the radar object it last took
 (0.5 without one), raised for a track with an emitter: ``1 - (1 - p) * emitter_doubt``
@@ -79,6 +82,9 @@ FloatArray = npt.NDArray[np.float64]
 #: Emitter key of RF fixes without a centre frequency.
 UNKNOWN_EMITTER = "unknown"
 _FORBIDDEN = 1.0e9
+# a radar report that may update a track: the report, its object, the object's UAV score, R
+# and the measurement (e, n, u; or e, n for a report below the ground: ``flat_below_ground``)
+_Cand = tuple[RadarTrack, RadarObject, float, PackedR, tuple[float, ...]]
 
 
 def emitter_key(freq_hz: float | None) -> str:
@@ -99,13 +105,15 @@ class MultiSettings:
     continuity_bonus: float = 0.0  # NIS credit for the radar object a track took last
     velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
     velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
-    #: a confirmed track is output while its last accepted measurement is at most this old
-    #: (None: the profile's max_coast_s, which only decides when the track is dropped)
-    output_coast_s: float | None = 5.0
-    #: a track's emitter is taken from it after this many of the emitter's fixes in a row
-    #: fell outside its gate (the link was wrong, or the UAV flew out of the fixes' reach);
-    #: None: never (each such fix is a rejection of the track)
-    emitter_unlink_misses: int | None = 2
+    output_coast_s: float | None = 3.0  # published while the last update is this recent
+    radar_output_s: float | None = 3.0  # inside radar cover: ... and the last radar update
+    emitter_misses: int | None = 3  # this many fixes of its emitter in a row outside a
+    # track's gate unlink the emitter from it (None: never)
+    tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
+    merge_keeps_live: bool = True  # a merge keeps the recently updated track over the older
+    flat_below_ground: bool = True  # a report below the ground updates east / north only
+    birth_sep_m: float | None = 25.0  # a strong object inside a track's gate starts a track
+    # when that track took another report of the frame this far away (None: never)
 
 
 class UavTrack:
@@ -213,6 +221,8 @@ class MultiTracker:
                 f.predict(t - tr.t)
                 at = t
             x, p = f.mean()
+            if not self._published(tr, at, x):
+                continue
             out.append(
                 TrackOutput(
                     tr.id, at, np.array(x, dtype=float), expand_upper(p), self.uav_prob(tr),
@@ -221,6 +231,22 @@ class MultiTracker:
             )  # fmt: skip
         out.sort(key=lambda o: (-o.uav_prob, o.track_id))
         return out
+
+    def _published(self, tr: UavTrack, t: float, x: list[float]) -> bool:
+        """Whether a confirmed track at ``t`` (position ``x``) is output: its last update at
+        most ``output_coast_s`` old and, inside the radar's range gate, its last radar update
+        at most ``radar_output_s`` old (an emitter inside radar cover that the radar does not
+        see is on the ground: a UAV on its pad with its link on, or one that has landed)."""
+        st = self.settings
+        if st.output_coast_s is not None and t - tr.last_update_t > st.output_coast_s:
+            return False
+        if st.radar_output_s is None:
+            return True
+        if tr.last_radar_t is not None and t - tr.last_radar_t <= st.radar_output_s:
+            return True
+        rx, ry, rz = self._radar_pos
+        d2 = (x[0] - rx) ** 2 + (x[1] - ry) ** 2 + (x[2] - rz) ** 2
+        return d2 > self._gate2
 
     # --- track life ------------------------------------------------------------------------
     def _new_track(self, t: float, x: list[float], P: FloatArray, confirmed: bool) -> UavTrack:
@@ -265,7 +291,8 @@ class MultiTracker:
         cfg = self.cfg
         dv = self._extra_var
         rx, ry, rz = self._radar_pos
-        cands: list[tuple[RadarTrack, RadarObject, float, PackedR]] = []
+        cands: list[_Cand] = []
+        flat = self.settings.flat_below_ground
         for trk in frame.tracks:
             self._count("radar_reports")
             if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
@@ -278,15 +305,26 @@ class MultiTracker:
             if d2 > self._gate2 or (obj.coasting and cfg.skip_radar_coasts):
                 continue
             s = obj.score(cfg)
+            z: tuple[float, ...] = (trk.e, trk.n, trk.u)
+            if flat and trk.u < -cfg.below_ground_m:
+                # the elevation of a low target is the radar's weak point (ground multipath):
+                # range and azimuth still place it; its object without the below-ground term
+                if obj.up < -cfg.below_ground_m:
+                    s += cfg.below_ground_weight
+                z, r = (trk.e, trk.n), (r[0], r[1], r[3])
             if s >= cfg.follow_min:
-                cands.append((trk, obj, s, r))
+                cands.append((trk, obj, s, r, z))
         self._advance(t)
-        live = [tr for tr in self.tracks if tr.t <= t]
+        take_tentative = self.settings.tentative_takes_radar
+        live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
         nis = np.full((len(live), len(cands)), math.inf)
         for a, tr in enumerate(live):
-            for b, (trk, _obj, _s, r) in enumerate(cands):
-                nis[a, b] = tr.filter.nis((trk.e, trk.n, trk.u), r)
+            for b, c in enumerate(cands):
+                # a 2D report's NIS on the 3D gate's scale
+                n = tr.filter.nis(c[4], c[3])
+                nis[a, b] = n if len(c[4]) == 3 else n * self._g3 / self._g2
         taken: set[int] = set()
+        took: dict[int, int] = {}  # live track index -> the candidate it took
         if live and cands:
             # NIS, less a bonus for the object the track followed last; the UAV score only
             # decides who may update a track (follow_min): between two UAVs it says nothing
@@ -308,9 +346,13 @@ class MultiTracker:
                 if cost[a, b] >= _FORBIDDEN:
                     continue
                 tr = live[a]
-                trk, obj, s, r = cands[b]
-                w = self.robust.weight(float(nis[a, b]), 3)
-                tr.filter.update((trk.e, trk.n, trk.u), scale_packed(r, 1.0 / w) if w != 1.0 else r)
+                trk, obj, s, r, z = cands[b]
+                dof = len(z)
+                n = float(nis[a, b]) if dof == 3 else float(nis[a, b]) * self._g2 / self._g3
+                w = self.robust.weight(n, dof)
+                if dof == 2:
+                    self._hold_height(tr)
+                tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
                 self._accept(tr, t)
                 if not tr.confirmed:
                     tr.confirmed = True
@@ -320,24 +362,30 @@ class MultiTracker:
                 tr.last_radar_t = t
                 tr.score = s
                 taken.add(b)
+                took[a] = b
         # a confirmed track whose own object reported outside its gate: a rejection
         for a, tr in enumerate(live):
             if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
                 continue
-            for b, (trk, _obj, _s, _r) in enumerate(cands):
-                if trk.track_id == tr.followed and nis[a, b] > self._g3:
+            for b, c in enumerate(cands):
+                if c[0].track_id == tr.followed and nis[a, b] > self._g3:
                     self._reject(tr)
                     break
         # strong objects that no track explains start tracks
         birth_age = self.settings.birth_age_s
         if birth_age is None:
             birth_age = cfg.stationary_min_age_s
-        for b, (trk, obj, s, _r) in enumerate(cands):
+        for b, (trk, obj, s, _r, z) in enumerate(cands):
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
+                continue
+            if len(z) != 3:
                 continue
             if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
                 continue
-            if any(nis[a, b] <= self._g3 for a in range(len(live))):
+            if any(
+                nis[a, b] <= self._g3 and not self._apart(a, b, took, cands)
+                for a in range(len(live))
+            ):
                 continue
             kf = obj.kf
             assert kf is not None
@@ -346,6 +394,29 @@ class MultiTracker:
             tr.last_radar_t = t
             tr.score = s
         self._merge(t)
+
+    def _apart(self, a: int, b: int, took: dict[int, int], cands: list[_Cand]) -> bool:
+        """Whether candidate ``b``, inside live track ``a``'s gate, is another UAV than the
+        one ``a`` follows: ``a`` took another report of this frame, more than ``birth_sep_m``
+        away horizontally (two radar tracks reporting in the same frame, neither coasting,
+        follow two objects; one UAV split into two radar tracks gives nearby reports)."""
+        sep = self.settings.birth_sep_m
+        c = took.get(a)
+        if sep is None or c is None:
+            return False
+        za, zb = cands[c][0], cands[b][0]
+        return (za.e - zb.e) ** 2 + (za.n - zb.n) ** 2 > sep * sep
+
+    def _hold_height(self, tr: UavTrack) -> None:
+        """Before an update without height: hold the climb rate near 0 and keep the track
+        above the ground (soft: a pseudo-measurement at ground level when it is below)."""
+        p = self.profile
+        sd = p.vz_hold_sigma_mps
+        f = tr.filter
+        f.update_scalar(5, 0.0, sd * sd)
+        x, _ = f.mean()
+        if x[2] < -self.cfg.below_ground_m:
+            f.update_scalar(2, 0.0, self.cfg.below_ground_m**2)
 
     def _merge(self, t: float) -> None:
         conf = [tr for tr in self.tracks if tr.confirmed]
@@ -379,8 +450,18 @@ class MultiTracker:
                     and a.followed != b.followed
                 ):
                     continue  # two objects side by side: two UAVs
-                # keep the older track; it inherits the younger one's emitter
+                # keep the older track; it inherits the younger one's emitter. With
+                # merge_keeps_live, a track updated within merge_s is kept over one that is
+                # not (a coasting track that lost its UAV drifting onto another UAV's track),
+                # and a coasting track's emitter is not inherited.
                 keep, lose = (a, b) if (a.born_t, a.id) <= (b.born_t, b.id) else (b, a)
+                if st.merge_keeps_live:
+                    la = t - a.last_update_t <= st.merge_s
+                    lb = t - b.last_update_t <= st.merge_s
+                    if la != lb:
+                        keep, lose = (a, b) if la else (b, a)
+                    if t - lose.last_update_t > st.merge_s:
+                        lose.emitter = None
                 if keep.emitter is None:
                     keep.emitter = lose.emitter
                 self._drop(lose, "merged")
@@ -404,7 +485,10 @@ class MultiTracker:
         self._advance(t)
         em = emitter_key(att.center_freq_hz)
         own = [tr for tr in self.tracks if tr.emitter == em and tr.t <= t]
-        if own:
+        tentative_only = not self.settings.tentative_takes_radar and all(
+            not tr.confirmed for tr in own
+        )
+        if own and not tentative_only:
             tr = min(own, key=lambda x: (not x.confirmed, x.id))
             self._rf_to(tr, t, z, r)
             return
@@ -419,7 +503,12 @@ class MultiTracker:
             tr.emitter = em
             tr.emitter_misses = 0
             self._count("emitter_linked")
+            for o in own:  # the emitter's tentative track: the confirmed track took over
+                self._drop(o, "emitter_linked")
             self._rf_to(tr, t, z, r)
+            return
+        if own:
+            self._rf_to(min(own, key=lambda x: x.id), t, z, r)
             return
         p = self.profile
         P = np.zeros((6, 6))
@@ -458,15 +547,14 @@ class MultiTracker:
         if hit:
             tr.emitter_misses = 0
             return
-        limit = self.settings.emitter_unlink_misses
-        if limit is not None and tr.emitter is not None and tr.last_radar_t is not None:
-            # a radar-fed track whose emitter's fixes keep missing it: the link is wrong
-            tr.emitter_misses += 1
-            if tr.emitter_misses >= limit:
-                tr.emitter = None
-                tr.emitter_misses = 0
-                self._count("emitter_unlinked")
-            return
+        tr.emitter_misses += 1
+        n_miss = self.settings.emitter_misses
+        if n_miss is not None and tr.emitter_misses >= n_miss:
+            # its emitter is elsewhere: the track took another UAV (or the emitter is a UAV
+            # on the ground); the emitter's next fix links anew
+            tr.emitter = None
+            tr.emitter_misses = 0
+            self._count("emitter_unlinked")
         self._reject(tr)
 
 
@@ -482,9 +570,10 @@ class MultiGrid:
     """The confirmed tracks at every grid epoch ``k / frequency_hz``, emitted as processed time
     passes it (the same for a live node and an offline run): call :meth:`before` with an
     item's time before feeding the item to the tracker, :meth:`advance` when everything up to
-    a time has been processed. Each track is predicted to the epoch, while its last accepted
-    measurement is at most ``output_coast_s`` old (the profile's ``max_coast_s`` when None).
-    No epoch before ``t0`` (default: the first time seen) or after ``t1``."""
+    a time has been processed. Each track the tracker publishes (:meth:`MultiTracker.outputs`)
+    is predicted to the epoch, while its last accepted measurement is at most the profile's
+    ``max_coast_s`` old. No epoch before ``t0`` (default: the first time seen) or after
+    ``t1``."""
 
     def __init__(
         self,
@@ -499,8 +588,7 @@ class MultiGrid:
         self.frequency_hz = float(frequency_hz)
         self._k: int | None = None if t0 is None else self.first_epoch(float(t0))
         self._t1 = math.inf if t1 is None else float(t1)
-        out_coast = tracker.settings.output_coast_s
-        self.max_coast_s = tracker.profile.max_coast_s if out_coast is None else out_coast
+        self.max_coast_s = tracker.profile.max_coast_s
 
     def epoch_time(self, k: int) -> float:
         return k / self.frequency_hz
