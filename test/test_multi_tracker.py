@@ -19,8 +19,10 @@ from uav_fusion.core.estimator.multi import (
     GridEpoch,
     MultiTracker,
     TrackOutput,
+    _merge_nis,
     emitter_key,
     run_multi,
+    velocity_nis,
 )
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
@@ -123,6 +125,36 @@ def test_a_swap_in_the_radars_own_tracker_does_not_swap_our_ids(site: Site) -> N
     switches = sum(x != y for x, y in itertools.pairwise(ids_a))
     switches += sum(x != y for x, y in itertools.pairwise(ids_b))
     assert switches <= 1
+
+
+def _random_state(rng: np.random.Generator) -> tuple[list[float], list[float], np.ndarray]:
+    a = rng.normal(size=(6, 6)) * rng.uniform(0.5, 30.0)
+    P = a @ a.T + 0.1 * np.eye(6)
+    packed = [float(P[i, j]) for i in range(6) for j in range(i, 6)]
+    return [float(v) for v in rng.normal(0.0, 50.0, 6)], packed, P
+
+
+def test_velocity_and_merge_distances_match_a_linear_solve() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        xa, pa, Pa = _random_state(rng)
+        xb, pb, Pb = _random_state(rng)
+        vn, ve, vd = (float(v) for v in rng.normal(0.0, 10.0, 3))
+        vel = (vn, ve, vd)
+        s2 = float(rng.uniform(0.1, 20.0))
+        d = np.array([vel[1] - xa[3], vel[0] - xa[4], -vel[2] - xa[5]])  # NED -> ENU
+        want = float(d @ np.linalg.solve(Pa[3:, 3:] + s2 * np.eye(3), d))
+        assert velocity_nis(xa, pa, vel, s2) == pytest.approx(want, rel=1e-9)
+        for k in (2, 3):
+            dp = np.array(xa[:k]) - np.array(xb[:k])
+            want = float(dp @ np.linalg.solve(Pa[:k, :k] + Pb[:k, :k], dp))
+            assert _merge_nis(xa, pa, xb, pb, k) == pytest.approx(want, rel=1e-9)
+    x, p, _ = _random_state(rng)
+    assert velocity_nis(x, p, None, 1.0) == 0.0
+    zero = [0.0] * 21
+    assert velocity_nis(x, zero, (1.0, 2.0, 3.0), 0.0) == 0.0  # singular: no velocity cue
+    assert _merge_nis(x, zero, x, zero, 3) is None
+    assert _merge_nis(x, zero, x, zero, 2) is None
 
 
 def test_emitter_keys() -> None:

@@ -293,16 +293,22 @@ class MultiTracker:
         rx, ry, rz = self._radar_pos
         cands: list[_Cand] = []
         flat = self.settings.flat_below_ground
+        if frame.tracks:
+            self._count("radar_reports", len(frame.tracks))
+        r_at = self._r_obj.r_at
+        update_object = self.objects.update
+        gate2 = self._gate2
+        skip_coasts = cfg.skip_radar_coasts
+        isfinite = math.isfinite
         for trk in frame.tracks:
-            self._count("radar_reports")
-            if not math.isfinite(trk.t + trk.e + trk.n + trk.u):
+            if not isfinite(trk.t + trk.e + trk.n + trk.u):
                 self._count("rejected_invalid")
                 continue
-            ro = self._r_obj.r_at(trk.e, trk.n, trk.u)
-            obj = self.objects.update(trk, ro)
+            ro = r_at(trk.e, trk.n, trk.u)
+            obj = update_object(trk, ro)
             r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
             d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
-            if d2 > self._gate2 or (obj.coasting and cfg.skip_radar_coasts):
+            if d2 > gate2 or (skip_coasts and obj.coasting):
                 continue
             s = obj.score(cfg)
             z: tuple[float, ...] = (trk.e, trk.n, trk.u)
@@ -317,58 +323,70 @@ class MultiTracker:
         self._advance(t)
         take_tentative = self.settings.tentative_takes_radar
         live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
-        nis = np.full((len(live), len(cands)), math.inf)
-        for a, tr in enumerate(live):
-            for b, c in enumerate(cands):
-                # a 2D report's NIS on the 3D gate's scale
-                n = tr.filter.nis(c[4], c[3])
-                nis[a, b] = n if len(c[4]) == 3 else n * self._g3 / self._g2
+        g2 = self._g2
+        g3 = self._g3
+        nis_rows: list[list[float]] = []
+        for tr in live:
+            f = tr.filter
+            row = []
+            for c in cands:
+                n = f.nis(c[4], c[3])
+                row.append(n if len(c[4]) == 3 else n * g3 / g2)  # 2D on the 3D gate's scale
+            nis_rows.append(row)
         taken: set[int] = set()
         took: dict[int, int] = {}  # live track index -> the candidate it took
         if live and cands:
             # NIS, less a bonus for the object the track followed last; the UAV score only
             # decides who may update a track (follow_min): between two UAVs it says nothing
-            same = np.array(
-                [[c[0].track_id == tr.followed for c in cands] for tr in live], dtype=bool
-            )
-            cost = nis - self.settings.continuity_bonus * same
-            wv = self.settings.velocity_weight
-            if wv > 0.0:
-                s2 = self.settings.velocity_sigma_mps**2
-                for a, tr in enumerate(live):
-                    x, pk = tr.filter.mean()
-                    for b, c in enumerate(cands):
-                        if nis[a, b] <= self._g3:
-                            cost[a, b] += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
-            cost = np.where(nis <= self._g3, cost, _FORBIDDEN)
-            rows, cols = linear_sum_assignment(cost)
-            for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
-                if cost[a, b] >= _FORBIDDEN:
-                    continue
-                tr = live[a]
-                trk, obj, s, r, z = cands[b]
-                dof = len(z)
-                n = float(nis[a, b]) if dof == 3 else float(nis[a, b]) * self._g2 / self._g3
-                w = self.robust.weight(n, dof)
-                if dof == 2:
-                    self._hold_height(tr)
-                tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
-                self._accept(tr, t)
-                if not tr.confirmed:
-                    tr.confirmed = True
-                    tr.mofn = None
-                    self._count("confirmed")
-                tr.followed = trk.track_id
-                tr.last_radar_t = t
-                tr.score = s
-                taken.add(b)
-                took[a] = b
+            st = self.settings
+            bonus = st.continuity_bonus
+            wv = st.velocity_weight
+            s2 = st.velocity_sigma_mps**2
+            cost_rows: list[list[float]] = []
+            any_inside = False
+            for tr, row in zip(live, nis_rows, strict=True):
+                x, pk = tr.filter.mean() if wv > 0.0 else ([], [])
+                crow = []
+                for c, n in zip(cands, row, strict=True):
+                    if not n <= g3:
+                        crow.append(_FORBIDDEN)
+                        continue
+                    any_inside = True
+                    v = n - bonus * (c[0].track_id == tr.followed)
+                    if wv > 0.0:
+                        v += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
+                    crow.append(v)
+                cost_rows.append(crow)
+            if any_inside:
+                cost = np.array(cost_rows)
+                rows, cols = linear_sum_assignment(cost)
+                for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
+                    if cost_rows[a][b] >= _FORBIDDEN:
+                        continue
+                    tr = live[a]
+                    trk, obj, s, r, z = cands[b]
+                    dof = len(z)
+                    n = nis_rows[a][b] if dof == 3 else nis_rows[a][b] * g2 / g3
+                    w = self.robust.weight(n, dof)
+                    if dof == 2:
+                        self._hold_height(tr)
+                    tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
+                    self._accept(tr, t)
+                    if not tr.confirmed:
+                        tr.confirmed = True
+                        tr.mofn = None
+                        self._count("confirmed")
+                    tr.followed = trk.track_id
+                    tr.last_radar_t = t
+                    tr.score = s
+                    taken.add(b)
+                    took[a] = b
         # a confirmed track whose own object reported outside its gate: a rejection
         for a, tr in enumerate(live):
             if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
                 continue
             for b, c in enumerate(cands):
-                if c[0].track_id == tr.followed and nis[a, b] > self._g3:
+                if c[0].track_id == tr.followed and nis_rows[a][b] > g3:
                     self._reject(tr)
                     break
         # strong objects that no track explains start tracks
@@ -383,7 +401,7 @@ class MultiTracker:
             if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
                 continue
             if any(
-                nis[a, b] <= self._g3 and not self._apart(a, b, took, cands)
+                nis_rows[a][b] <= g3 and not self._apart(a, b, took, cands)
                 for a in range(len(live))
             ):
                 continue
@@ -420,20 +438,21 @@ class MultiTracker:
 
     def _merge(self, t: float) -> None:
         conf = [tr for tr in self.tracks if tr.confirmed]
+        if len(conf) < 2:
+            return
         st = self.settings
+        means = [tr.filter.mean() for tr in conf]
+        recent = [self._radar_recent(tr, t) for tr in conf]
         for i, a in enumerate(conf):
-            for b in conf[i + 1 :]:
+            xa, pa = means[i]
+            for j in range(i + 1, len(conf)):
+                b = conf[j]
                 if a not in self.tracks or b not in self.tracks:
                     continue
-                xa, pa = a.filter.mean()
-                xb, pb = b.filter.mean()
+                xb, pb = means[j]
                 # a track without a recent radar update has no altitude worth comparing
-                k = 3 if self._radar_recent(a, t) and self._radar_recent(b, t) else 2
-                d = np.array(xa[:k]) - np.array(xb[:k])
-                S = expand_upper(pa)[:k, :k] + expand_upper(pb)[:k, :k]
-                try:
-                    m = float(d @ np.linalg.solve(S, d))
-                except np.linalg.LinAlgError:
+                m = _merge_nis(xa, pa, xb, pb, 3 if recent[i] and recent[j] else 2)
+                if m is None:
                     continue
                 if m > st.merge_nis:
                     a.close_since.pop(b.id, None)
@@ -658,12 +677,56 @@ def velocity_nis(
 ) -> float:
     """NIS (3 dof) of a reported NED velocity against the velocity of the state ``x`` whose
     6x6 covariance is packed in ``p`` (upper triangle by rows), plus ``s2`` on each axis; 0
-    for a report without a velocity."""
+    for a report without a velocity or a singular sum."""
     if vel_ned is None:
         return 0.0
-    d = np.array((vel_ned[1] - x[3], vel_ned[0] - x[4], -vel_ned[2] - x[5]))
-    S = expand_upper(p)[3:6, 3:6] + s2 * np.eye(3)
-    try:
-        return float(d @ np.linalg.solve(S, d))
-    except np.linalg.LinAlgError:
-        return 0.0
+    q = _quad3(
+        vel_ned[1] - x[3], vel_ned[0] - x[4], -vel_ned[2] - x[5],
+        p[15] + s2, p[16], p[17], p[18] + s2, p[19], p[20] + s2,
+    )  # fmt: skip
+    return 0.0 if q is None else q
+
+
+def _merge_nis(
+    xa: list[float], pa: list[float], xb: list[float], pb: list[float], k: int
+) -> float | None:
+    """Squared Mahalanobis distance of two states' positions (the first ``k`` = 2 or 3 axes)
+    on the sum of their covariances (packed upper triangles); None when the sum is
+    singular."""
+    d0 = xa[0] - xb[0]
+    d1 = xa[1] - xb[1]
+    s00 = pa[0] + pb[0]
+    s01 = pa[1] + pb[1]
+    s11 = pa[6] + pb[6]
+    if k == 2:
+        det = s00 * s11 - s01 * s01
+        if det == 0.0:
+            return None
+        q = (d0 * (s11 * d0 - s01 * d1) + d1 * (s00 * d1 - s01 * d0)) / det
+        return q if math.isfinite(q) else None
+    return _quad3(
+        d0, d1, xa[2] - xb[2], s00, s01, pa[2] + pb[2], s11, pa[7] + pb[7], pa[11] + pb[11]
+    )
+
+
+def _quad3(
+    d0: float, d1: float, d2: float,
+    s00: float, s01: float, s02: float, s11: float, s12: float, s22: float,
+) -> float | None:  # fmt: skip
+    """``d^T S^-1 d`` for a symmetric 3x3 ``S`` (upper triangle), by its adjugate; None when
+    ``S`` is singular or the result is not finite."""
+    i00 = s11 * s22 - s12 * s12
+    i01 = s02 * s12 - s01 * s22
+    i02 = s01 * s12 - s02 * s11
+    det = s00 * i00 + s01 * i01 + s02 * i02
+    if det == 0.0:
+        return None
+    i11 = s00 * s22 - s02 * s02
+    i12 = s01 * s02 - s00 * s12
+    i22 = s00 * s11 - s01 * s01
+    q = (
+        d0 * (i00 * d0 + i01 * d1 + i02 * d2)
+        + d1 * (i01 * d0 + i11 * d1 + i12 * d2)
+        + d2 * (i02 * d0 + i12 * d1 + i22 * d2)
+    ) / det
+    return q if math.isfinite(q) else None
