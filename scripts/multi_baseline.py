@@ -441,6 +441,7 @@ class Figures:
     gospa_mean_m: float
     id_switches: int
     epochs: int
+    id_switches_kept: int = 0
 
 
 def figures(flight: Flight, epochs: Sequence[GridEpoch], radius_m: float = 100.0) -> Figures:
@@ -473,11 +474,11 @@ def figures(flight: Flight, epochs: Sequence[GridEpoch], radius_m: float = 100.0
                 cov[v][0] += 1
         false_epochs += int((~near_any).sum())
     ids = {o.track_id for ep in epochs for o in ep.tracks}
-    gospa_m, switches = math.nan, 0
+    gospa_m, switches, kept = math.nan, 0, 0
     if truths and epochs:
         step = float(np.median(np.diff(grid_t))) if grid_t.size > 1 else 1.0
         sc = pool([score_flight(truths, epochs, MultiScoreSettings(step_s=step))])
-        gospa_m, switches = sc.gospa_mean_m, sc.id_switches
+        gospa_m, switches, kept = sc.gospa_mean_m, sc.id_switches, sc.id_switches_kept
     return Figures(
         len(ids),
         {v: (c[0], c[1]) for v, c in cov.items()},
@@ -486,6 +487,7 @@ def figures(flight: Flight, epochs: Sequence[GridEpoch], radius_m: float = 100.0
         gospa_m,
         switches,
         len(epochs),
+        kept,
     )
 
 
@@ -533,7 +535,8 @@ def compare(
         print(
             f"  {label:9s} {dt:8.3f} s  confirmed {f.confirmed:4d}  coverage {_fmt_cov(f)}  "
             f"false-track epochs {f.false_epochs} of {f.track_epochs}  "
-            f"GOSPA {f.gospa_mean_m:.1f} m  id switches {f.id_switches}"
+            f"GOSPA {f.gospa_mean_m:.1f} m  id switches {f.id_switches} "
+            f"({f.id_switches_kept} on kept correspondences)"
         )
     ratio = t_ss / t_ours if t_ours > 0 else math.inf
     print(f"  time ratio stonesoup / ours {ratio:.1f}; baseline dropped {b.dropped}")
@@ -553,9 +556,10 @@ def print_table(rows: Sequence[dict[str, Any]]) -> None:
     print()
     print(
         "| flight | ours s | Stone Soup s | ratio | coverage % ours / SS | "
-        "false-track epochs ours / SS | confirmed ids ours / SS | GOSPA m ours / SS |"
+        "false-track epochs ours / SS | confirmed ids ours / SS | GOSPA m ours / SS | "
+        "ID switches (kept corr.) ours / SS |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
 
     def line(
         name: str, t_o: float, t_s: float, fo: Sequence[Figures], fb: Sequence[Figures]
@@ -567,7 +571,9 @@ def print_table(rows: Sequence[dict[str, Any]]) -> None:
             f"| {name} | {t_o:.2f} | {t_s:.2f} | {ratio:.1f} | "
             f"{_pct_cell(fo)} / {_pct_cell(fb)} | {sum(f.false_epochs for f in fo)} / "
             f"{sum(f.false_epochs for f in fb)} | {sum(f.confirmed for f in fo)} / "
-            f"{sum(f.confirmed for f in fb)} | {g_o:.1f} / {g_b:.1f} |"
+            f"{sum(f.confirmed for f in fb)} | {g_o:.1f} / {g_b:.1f} | "
+            f"{sum(f.id_switches for f in fo)} ({sum(f.id_switches_kept for f in fo)}) / "
+            f"{sum(f.id_switches for f in fb)} ({sum(f.id_switches_kept for f in fb)}) |"
         )
 
     for r in rows:

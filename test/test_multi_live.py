@@ -138,6 +138,7 @@ def test_the_evaluator_scores_published_tracks_as_a_set(ros: None, tmp_path: Pat
     assert got.gospa_mean_m == pytest.approx(ref.gospa_mean_m, abs=1e-6)
     assert got.false_track_s == ref.false_track_s == pytest.approx(5.0)
     assert [u.id_switches for u in got.uavs] == [1, 0]
+    assert [u.id_switches_kept for u in got.uavs] == [u.id_switches_kept for u in ref.uavs]
     assert got.epochs == ref.epochs
     files = node.write_report()
     assert "tracks (fusion/tracks, 2 Hz)" in files.markdown.read_text(encoding="utf-8")

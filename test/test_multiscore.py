@@ -309,6 +309,52 @@ def test_flight_coverage_errors_switches_and_false_time() -> None:
     assert fs.assignments[2].false_ids == (9,)
 
 
+def test_kept_correspondence_ignores_a_crosswise_assignment_for_an_epoch() -> None:
+    """Two UAVs 10 m apart (north) flying east side by side, track 1 on "a" and track 2 on
+    "b" (1 m off); at epochs 3 and 4 each track is 6 m off towards the other UAV, so GOSPA's
+    per-epoch assignment crosses them (4 m + 4 m beats 6 m + 6 m): two switches per UAV on
+    GOSPA's assignment, none on the kept correspondence."""
+    a, b = _truth(0.0, 0.0), _truth(0.0, 10.0)
+    epochs = []
+    for k in range(11):
+        t = T0 + k
+        pa, pb = _at(a, t), _at(b, t)
+        off = (0.0, 6.0, 0.0) if k in (3, 4) else (1.0, 0.0, 0.0)
+        back = (0.0, -6.0, 0.0) if k in (3, 4) else (1.0, 0.0, 0.0)
+        epochs.append(EpochTracks(t, (_est(1, pa, off), _est(2, pb, back))))
+    fs = score_flight({"a": a, "b": b}, epochs)
+    ua, ub = fs.uavs
+    assert ua.track_ids == (1, 1, 2, 2, 1, 1, 1, 1, 1, 1)  # airborne from epoch 1
+    assert ub.track_ids == (2, 2, 1, 1, 2, 2, 2, 2, 2, 2)
+    assert (ua.id_switches, ub.id_switches) == (2, 2)
+    assert (ua.id_switches_kept, ub.id_switches_kept) == (0, 0)
+    sc = pool([fs])
+    assert (sc.id_switches, sc.id_switches_kept) == (4, 0)
+    assert sc.uavs[0].id_switches_kept == 0
+
+
+def test_kept_correspondence_counts_a_track_that_leaves_its_uav() -> None:
+    """Track 1 on "a" (north 0) leaves it at epoch 4 (100 m north per epoch) and reaches "b"
+    (north 300) at epoch 6; "a" gets track 5 at epoch 8: one switch for "a" on either
+    assignment, none for "b" (it had no track before)."""
+    a, b = _truth(0.0, 0.0), _truth(0.0, 300.0)
+    epochs = []
+    for k in range(11):
+        t = T0 + k
+        pa = _at(a, t)
+        north = min(max(0.0, 100.0 * (k - 3)), 300.0)
+        tracks = [_est(1, pa, (0.0, north, 0.0))]
+        if k >= 8:
+            tracks.append(_est(5, pa, (2.0, 0.0, 0.0)))
+        epochs.append(EpochTracks(t, tuple(tracks)))
+    fs = score_flight({"a": a, "b": b}, epochs)
+    ua, ub = fs.uavs
+    assert ua.track_ids == (1, 1, 1, None, None, None, None, 5, 5, 5)
+    assert ub.track_ids == (None, None, None, None, None, 1, 1, 1, 1, 1)
+    assert (ua.id_switches, ua.id_switches_kept) == (1, 1)
+    assert (ub.id_switches, ub.id_switches_kept) == (0, 0)
+
+
 def test_flight_airborne_mask_and_function() -> None:
     a = _truth(0.0, 0.0)
     # every UAV is airborne only between T0 + 3 and T0 + 6 (samples), by mask and by function

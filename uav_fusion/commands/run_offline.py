@@ -210,7 +210,8 @@ def write_targets(flight: Flight, profile: Profile, site: Site, path: str, hz: f
     for u in sc.uavs:
         print(
             f"  {u.name}: coverage {u.coverage_pct:.1f} % of {u.epochs} airborne epochs, "
-            f"error mean {u.err_mean_m:.1f} m, {u.id_switches} id switches, "
+            f"error mean {u.err_mean_m:.1f} m, {u.id_switches} id switches "
+            f"({u.id_switches_kept} on kept correspondences), "
             f"{u.fragmentations} fragmentations"
         )
 

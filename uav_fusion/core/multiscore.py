@@ -36,7 +36,14 @@ published track. GOSPA's optimal assignment then gives, per UAV:
 * ``coverage_pct``: airborne epochs with an assigned track (closer than ``c``);
 * 3D error mean, p50, p95, max over the assigned epochs;
 * ``id_switches``: the track id assigned to the UAV differs from the one at its previous
-  assigned epoch (MOTA-style; a gap in between does not reset it);
+  assigned epoch (a gap in between does not reset it). GOSPA's assignment is optimal per
+  epoch and has no memory: two UAVs a few metres apart, each with its own track a few metres
+  off, can be assigned crosswise for one epoch and back at the next (two switches each);
+* ``id_switches_kept``: the same count on the CLEAR MOT correspondence (Bernardin and
+  Stiefelhagen, 2008), which keeps each UAV's previous track while that track is still
+  published and closer than ``c``, and assigns the other UAVs and tracks optimally: a track
+  that stays with its UAV through a crossing is no switch, a track that leaves its UAV for
+  another is one (for each UAV) once it is more than ``c`` from its UAV or gone;
 * ``fragmentations``: over the UAV's airborne epochs, an assigned run is interrupted by
   unassigned epochs and assignment resumes (one per resumption; not-airborne epochs are
   skipped, so landing and taking off again is no fragmentation).
@@ -235,6 +242,7 @@ class UavSamples:
     id_switches: int
     fragmentations: int
     times: FloatArray = field(default_factory=lambda: np.zeros(0))  # the airborne epochs
+    id_switches_kept: int = 0  # on the CLEAR MOT correspondence (module text)
 
     def covered(self) -> npt.NDArray[np.bool_]:
         """Per airborne epoch: a track was assigned within the cut-off."""
@@ -282,6 +290,7 @@ class UavScore:
     err_max_m: float
     id_switches: int
     fragmentations: int
+    id_switches_kept: int = 0
 
     def as_dict(self) -> dict[str, str | float | int]:
         return asdict(self)
@@ -307,6 +316,7 @@ class MultiScore:
     missed_mean: float
     false_mean: float
     uavs: tuple[UavScore, ...]
+    id_switches_kept: int = 0
 
 
 def id_switches(track_ids: Sequence[int | None]) -> int:
@@ -332,6 +342,49 @@ def fragmentations(track_ids: Sequence[int | None]) -> int:
                 n += 1
             seen, gap = True, False
     return n
+
+
+class _KeptCorrespondence:
+    """The CLEAR MOT correspondence, epoch by epoch, and the ID switches counted on it: a
+    UAV keeps its previous track while that track is published and closer than ``c_m``
+    (closest kept pairs first, one UAV per track); the remaining UAVs and tracks are assigned
+    by minimum total squared distance, pairs at ``c_m`` or more left unassigned."""
+
+    def __init__(self, c_m: float) -> None:
+        self.c_m = c_m
+        self.previous: dict[str, int] = {}
+        self.switches: dict[str, int] = {}
+
+    def step(self, names: list[str], X: FloatArray, track_ids: list[int], Y: FloatArray) -> None:
+        if not names or not track_ids:
+            return
+        D = cdist(X, Y)
+        col = {tid: j for j, tid in enumerate(track_ids)}
+        match: dict[int, int] = {}
+        taken: set[int] = set()
+        held = sorted(
+            (float(D[i, col[self.previous[n]]]), i, col[self.previous[n]])
+            for i, n in enumerate(names)
+            if self.previous.get(n) in col
+        )
+        for d, i, j in held:
+            if d < self.c_m and j not in taken:
+                match[i] = j
+                taken.add(j)
+        rows = [i for i in range(len(names)) if i not in match]
+        cols = [j for j in range(len(track_ids)) if j not in taken]
+        if rows and cols:
+            sub = D[np.ix_(rows, cols)]
+            r, c = linear_sum_assignment(np.minimum(sub, self.c_m) ** 2)
+            for a, b in zip(r.tolist(), c.tolist(), strict=True):
+                if sub[a, b] < self.c_m:
+                    match[rows[a]] = cols[b]
+        for i, j in match.items():
+            n, tid = names[i], track_ids[j]
+            before = self.previous.get(n)
+            if before is not None and before != tid:
+                self.switches[n] = self.switches.get(n, 0) + 1
+            self.previous[n] = tid
 
 
 def _check_truth(name: str, tr: UavTruth) -> tuple[FloatArray, FloatArray]:
@@ -415,6 +468,7 @@ def score_flight(
     errs: dict[str, list[float]] = {name: [] for name in names}
     n_false = 0
     assignments: list[EpochAssignment] = []
+    kept = _KeptCorrespondence(s.gospa.c_m)
     for k, epoch in enumerate(outputs):
         present = [name for name in names if air[name][k]]
         tracks = list(epoch.tracks)
@@ -447,6 +501,7 @@ def score_flight(
             used.add(a)
         false_ids = tuple(tid for j, tid in enumerate(track_ids) if j not in used)
         n_false += len(false_ids)
+        kept.step(present, X, track_ids, Y)
         assignments.append(EpochAssignment(float(grid_t[k]), tuple(pairs), false_ids))
 
     uavs = tuple(
@@ -459,6 +514,7 @@ def score_flight(
             id_switches=id_switches(ids[name]),
             fragmentations=fragmentations(ids[name]),
             times=np.asarray(when[name], dtype=float),
+            id_switches_kept=kept.switches.get(name, 0),
         )
         for name in names
     )
@@ -516,6 +572,7 @@ def pool(flights: Sequence[FlightSamples]) -> MultiScore:
                 err_max_m=mx,
                 id_switches=sum(u.id_switches for u in us),
                 fragmentations=sum(u.fragmentations for u in us),
+                id_switches_kept=sum(u.id_switches_kept for u in us),
             )
         )
     all_u = [u for us in by_name.values() for u in us]
@@ -539,6 +596,7 @@ def pool(flights: Sequence[FlightSamples]) -> MultiScore:
         missed_mean=_mean([f.missed for f in flights]),
         false_mean=_mean([f.false for f in flights]),
         uavs=tuple(uav_scores),
+        id_switches_kept=sum(u.id_switches_kept for u in all_u),
     )
 
 
@@ -573,7 +631,8 @@ def epochs_from_published(
 def multi_summary(sc: MultiScore) -> str:
     """One line of a multi-target score (for reports and logs)."""
     per = "; ".join(
-        f"{u.name} {u.coverage_pct:.1f} % of {u.epochs} epochs, {u.id_switches} id switches"
+        f"{u.name} {u.coverage_pct:.1f} % of {u.epochs} epochs, {u.id_switches} id switches "
+        f"({u.id_switches_kept} on kept correspondences)"
         for u in sc.uavs
     )
     return (

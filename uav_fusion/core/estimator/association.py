@@ -75,6 +75,7 @@ class ScoreConfig:
     init_min: float = 1.0
     init_min_reports: int = 4
     skip_radar_coasts: bool = False
+    rf_nearest_only: bool = False
 
 
 
@@ -284,6 +285,7 @@ class ObjectTable:
         the number of objects credited."""
         cfg = self.cfg
         hits = 0
+        best: tuple[float, RadarObject] | None = None
         for obj in self.objects.values():
             dt = t - obj.last_t
             kf = obj.kf
@@ -302,7 +304,16 @@ class ObjectTable:
                 continue
             d2 = (s11 * de * de - 2.0 * s01 * de * dn + s00 * dn * dn) / det
             if d2 <= RF_GATE_99_2DOF:
+                if cfg.rf_nearest_only:
+                    if best is None or d2 < best[0]:
+                        best = (d2, obj)
+                    continue
                 obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
                 obj.rf_t = t
                 hits += 1
+        if best is not None:
+            obj = best[1]
+            obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
+            obj.rf_t = t
+            hits += 1
         return hits
