@@ -15,6 +15,8 @@ import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimator import load_profile, run_flight
+from uav_fusion.core.estimator.association import ObjectTable, ScoreConfig
+from uav_fusion.core.estimator.components import FixedRadarR
 from uav_fusion.core.estimator.runner import run_tracker
 from uav_fusion.core.estimator.tracker import Tracker, TrackerStep
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
@@ -78,6 +80,10 @@ def _imm(**changes: Any) -> dict[str, Any]:
         (
             lambda d: d["association"].update(skip_radar_coasts="yes"),
             r"association\.skip_radar_coasts must be true or false",
+        ),
+        (
+            lambda d: d["association"].update(rf_nearest_only=1),
+            r"association\.rf_nearest_only must be true or false",
         ),
         (
             lambda d: d["measurement"]["radar"].update(low_el_gain=-1.0),
@@ -429,3 +435,29 @@ def test_streaming_equals_the_offline_run_bit_for_bit(site: Site) -> None:
     for a, b in zip(live, offline, strict=True):
         assert (a.t, a.status, a.reason, a.track_id) == (b.t, b.status, b.reason, b.track_id)
         assert a._state == b._state  # the packed doubles: bit-identical
+
+
+@pytest.mark.parametrize("nearest_only", [False, True])
+def test_an_rf_fix_credits_every_object_in_its_gate_or_only_the_nearest(
+    nearest_only: bool,
+) -> None:
+    """Two radar objects 20 m apart, both inside the gate of an RF fix 5 m from the first: both
+    gain RF support, or (``rf_nearest_only``) only the first."""
+    cfg = dataclasses.replace(ScoreConfig(), rf_nearest_only=nearest_only)
+    table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
+    for k in range(5):
+        t = 100.0 + k
+        for tid, east in ((1, 500.0), (2, 520.0)):
+            table.update(
+                RadarTrack(t, tid, 0.0, 0.0, 0.0, east, 300.0, 50.0, (0.0, 0.0, 0.0), 0.5,
+                           None, -10.0)
+            )  # fmt: skip
+    hits = table.rf_fix(104.5, 505.0, 300.0, 400.0)
+    a, b = table.objects[1], table.objects[2]
+    assert a.rf_support == 1.0
+    if nearest_only:
+        assert hits == 1 and b.rf_support == 0.0
+    else:
+        assert hits == 2 and b.rf_support == 1.0
+    # a fix outside both gates credits nobody
+    assert table.rf_fix(104.5, 900.0, 300.0, 400.0) == 0

@@ -17,7 +17,9 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
   horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
   capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
-  evidence of a UAV);
+  evidence of a UAV); with ``rf_nearest_only`` a fix credits only the object it fits best
+  (smallest gate distance), not every object in its gate (clutter beside a UAV, or near a
+  UAV on its pad that the radar does not see, would share the UAV's emitter);
 * agreement with the fused track: moving average of "this object's report had an NIS of at
   most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
   the track's R allows for correlated errors), times ``fused_weight``;

@@ -595,7 +595,7 @@ def _tracker_fields(
                     if not isinstance(v, int) or isinstance(v, bool):
                         raise ConfigError(f"{where}: association.{key} must be an integer")
                     vals[key] = v
-                elif key == "skip_radar_coasts":
+                elif isinstance(getattr(defaults, key), bool):
                     v = assoc[key]
                     if not isinstance(v, bool):
                         raise ConfigError(f"{where}: association.{key} must be true or false")
