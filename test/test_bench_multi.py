@@ -16,7 +16,10 @@ from uav_fusion.cli import main
 from uav_fusion.core.bench.cache import cached_flights
 from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.bench.multi import (
+    MultiFlightResult,
     MultiScoreTask,
+    UavOutcome,
+    crossing_switches,
     crossings,
     multi_score_task,
     pool_multi,
@@ -27,7 +30,14 @@ from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimator import load_profile
 from uav_fusion.core.estimator.multi import MultiTracker, run_multi
 from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, pool, score_flight
+from uav_fusion.core.multiscore import (
+    EpochTracks,
+    MultiScoreSettings,
+    TrackEstimate,
+    UavTruth,
+    pool,
+    score_flight,
+)
 from uav_fusion.core.records import Flight, TruthFix
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
@@ -82,6 +92,57 @@ def test_crossings_are_closest_approaches_of_airborne_uavs() -> None:
     assert (name_a, name_b) == ("uav1", "uav2") and when == pytest.approx(100.0, abs=0.5)
     far = _fixes(t, 0.0 * t + 150.0, 10.0 * (t - 100.0), up)
     assert crossings(Flight("x", a, [], [], vehicles={"uav1": a, "uav2": far})) == []
+
+
+def test_id_switches_are_attributed_to_the_crossing_they_happen_at() -> None:
+    """Two UAVs 10 m apart (north) fly head-on and pass at t0 + 20 s; their two tracks swap
+    UAVs there (each follows the other UAV from then on), and at t0 + 60 s "a"'s track is
+    replaced by a new one. The swap is two switches at the crossing (one per UAV; on GOSPA's
+    assignment at the pass, on the kept correspondence once the tracks are 100 m from their
+    old UAVs), the replacement one switch near no crossing."""
+    t0 = 1_760_000_000.0
+    t = t0 + np.arange(0.0, 80.5, 0.5)
+    ea = -200.0 + 10.0 * (t - t0)
+    up = np.where(t - t0 >= 0.5, 50.0, 0.0)  # airborne (5 m above the first sample) from 1 s
+    truths = {
+        "a": UavTruth(t, np.column_stack([ea, np.zeros(t.size), up])),
+        "b": UavTruth(t, np.column_stack([-ea, np.full(t.size, 10.0), up])),
+    }
+    epochs = []
+    for k in range(81):
+        pa = np.array([-200.0 + 10.0 * k, 0.0, 50.0])
+        pb = np.array([200.0 - 10.0 * k, 10.0, 50.0])
+        on_a, on_b = (1, 2) if k < 20 else (2, 1)
+        if k >= 60:
+            on_a = 3
+        epochs.append(
+            EpochTracks(
+                t0 + k,
+                (TrackEstimate(on_a, np.r_[pa, 0.0, 0.0, 0.0]),
+                 TrackEstimate(on_b, np.r_[pb, 0.0, 0.0, 0.0])),
+            )
+        )  # fmt: skip
+    samples = score_flight(truths, epochs)
+    res = MultiFlightResult(
+        flight_id="pass", plan="pass", seed=0, split="test", profile="tracker",
+        samples=samples, uavs=(UavOutcome("a", False, 0, 0), UavOutcome("b", True, 0, 0)),
+        crossings=(("a", "b", t0 + 20.0),), flight_s=81.0, run_s=0.0,
+    )  # fmt: skip
+    ua, ub = samples.uavs
+    assert (ua.switch_times - t0).tolist() == [20.0, 60.0]
+    assert (ub.switch_times - t0).tolist() == [20.0]
+    assert [x - t0 for x in ua.switch_times_kept.tolist()][-1] == 60.0
+    assert 20.0 < ub.switch_times_kept[0] - t0 <= 26.0
+    assert crossing_switches(res, kept=False) == ([2], 1)
+    assert crossing_switches(res, kept=True) == ([2], 1)
+    # the same switches with the crossing elsewhere in time (or of other UAVs) are all away
+    far = MultiFlightResult(**{**res.__dict__, "crossings": (("a", "b", t0 + 45.0),)})
+    assert crossing_switches(far, kept=False) == ([0], 3)
+    other = MultiFlightResult(**{**res.__dict__, "crossings": (("a", "c", t0 + 20.0),)})
+    assert crossing_switches(other, kept=False) == ([1], 2)
+    sc = pool_multi([res])["tracker"]
+    assert (sc.crossings, sc.crossings_over_one, sc.crossings_over_one_kept) == (1, 1, 1)
+    assert (sc.id_switches, sc.id_switches_kept) == (3, 3)
 
 
 @pytest.fixture(scope="module")

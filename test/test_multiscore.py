@@ -328,6 +328,10 @@ def test_kept_correspondence_ignores_a_crosswise_assignment_for_an_epoch() -> No
     assert ub.track_ids == (2, 2, 1, 1, 2, 2, 2, 2, 2, 2)
     assert (ua.id_switches, ub.id_switches) == (2, 2)
     assert (ua.id_switches_kept, ub.id_switches_kept) == (0, 0)
+    # the switches happen where the crosswise pairing starts and ends (epochs 3 and 5)
+    assert (ua.switch_times - T0).tolist() == [3.0, 5.0]
+    assert (ub.switch_times - T0).tolist() == [3.0, 5.0]
+    assert ua.switch_times_kept.size == 0 and ub.switch_times_kept.size == 0
     sc = pool([fs])
     assert (sc.id_switches, sc.id_switches_kept) == (4, 0)
     assert sc.uavs[0].id_switches_kept == 0
@@ -353,6 +357,9 @@ def test_kept_correspondence_counts_a_track_that_leaves_its_uav() -> None:
     assert ub.track_ids == (None, None, None, None, None, 1, 1, 1, 1, 1)
     assert (ua.id_switches, ua.id_switches_kept) == (1, 1)
     assert (ub.id_switches, ub.id_switches_kept) == (0, 0)
+    # "a" switches to track 5 when it appears (epoch 8) on both assignments
+    assert (ua.switch_times - T0).tolist() == [8.0]
+    assert (ua.switch_times_kept - T0).tolist() == [8.0]
 
 
 def test_flight_airborne_mask_and_function() -> None:

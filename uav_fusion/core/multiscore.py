@@ -46,7 +46,9 @@ published track. GOSPA's optimal assignment then gives, per UAV:
   another is one (for each UAV) once it is more than ``c`` from its UAV or gone;
 * ``fragmentations``: over the UAV's airborne epochs, an assigned run is interrupted by
   unassigned epochs and assignment resumes (one per resumption; not-airborne epochs are
-  skipped, so landing and taking off again is no fragmentation).
+  skipped, so landing and taking off again is no fragmentation);
+* ``switch_times`` and ``switch_times_kept``: the epochs at which those switches happened
+  (so that a benchmark can attribute them, e.g. to the crossings of two UAVs).
 
 and per flight: ``false_track_s``, the number of estimates left unassigned summed over the
 epochs times ``step_s`` (a track on a UAV that is not airborne is false); the mean GOSPA
@@ -243,6 +245,8 @@ class UavSamples:
     fragmentations: int
     times: FloatArray = field(default_factory=lambda: np.zeros(0))  # the airborne epochs
     id_switches_kept: int = 0  # on the CLEAR MOT correspondence (module text)
+    switch_times: FloatArray = field(default_factory=lambda: np.zeros(0))  # of id_switches
+    switch_times_kept: FloatArray = field(default_factory=lambda: np.zeros(0))  # ... of the kept
 
     def covered(self) -> npt.NDArray[np.bool_]:
         """Per airborne epoch: a track was assigned within the cut-off."""
@@ -321,14 +325,20 @@ class MultiScore:
 
 def id_switches(track_ids: Sequence[int | None]) -> int:
     """Changes of the assigned track id from one assigned epoch to the next (None: none)."""
-    n, prev = 0, None
-    for tid in track_ids:
+    return len(id_switch_indices(track_ids))
+
+
+def id_switch_indices(track_ids: Sequence[int | None]) -> list[int]:
+    """The indices at which :func:`id_switches` counts a switch."""
+    out: list[int] = []
+    prev = None
+    for k, tid in enumerate(track_ids):
         if tid is None:
             continue
         if prev is not None and tid != prev:
-            n += 1
+            out.append(k)
         prev = tid
-    return n
+    return out
 
 
 def fragmentations(track_ids: Sequence[int | None]) -> int:
@@ -353,9 +363,11 @@ class _KeptCorrespondence:
     def __init__(self, c_m: float) -> None:
         self.c_m = c_m
         self.previous: dict[str, int] = {}
-        self.switches: dict[str, int] = {}
+        self.switches: dict[str, list[float]] = {}  # per UAV: the times of its switches
 
-    def step(self, names: list[str], X: FloatArray, track_ids: list[int], Y: FloatArray) -> None:
+    def step(
+        self, t: float, names: list[str], X: FloatArray, track_ids: list[int], Y: FloatArray
+    ) -> None:
         if not names or not track_ids:
             return
         D = cdist(X, Y)
@@ -383,7 +395,7 @@ class _KeptCorrespondence:
             n, tid = names[i], track_ids[j]
             before = self.previous.get(n)
             if before is not None and before != tid:
-                self.switches[n] = self.switches.get(n, 0) + 1
+                self.switches.setdefault(n, []).append(t)
             self.previous[n] = tid
 
 
@@ -501,7 +513,7 @@ def score_flight(
             used.add(a)
         false_ids = tuple(tid for j, tid in enumerate(track_ids) if j not in used)
         n_false += len(false_ids)
-        kept.step(present, X, track_ids, Y)
+        kept.step(float(grid_t[k]), present, X, track_ids, Y)
         assignments.append(EpochAssignment(float(grid_t[k]), tuple(pairs), false_ids))
 
     uavs = tuple(
@@ -511,10 +523,12 @@ def score_flight(
             assigned=len(errs[name]),
             errors=np.asarray(errs[name], dtype=float),
             track_ids=tuple(ids[name]),
-            id_switches=id_switches(ids[name]),
+            id_switches=len(sw := id_switch_indices(ids[name])),
             fragmentations=fragmentations(ids[name]),
             times=np.asarray(when[name], dtype=float),
-            id_switches_kept=kept.switches.get(name, 0),
+            id_switches_kept=len(kept.switches.get(name, [])),
+            switch_times=np.asarray([when[name][k] for k in sw], dtype=float),
+            switch_times_kept=np.asarray(kept.switches.get(name, []), dtype=float),
         )
         for name in names
     )

@@ -11,11 +11,16 @@ false-track seconds). It adds what only the twin knows:
   silent UAV (no control link, radar only) this is the figure that matters;
 * **crossings**: the times two airborne UAVs pass within ``CROSSING_M`` of each other (a local
   minimum of their 3D distance, from the truth; minima closer than ``CROSSING_GAP_S`` are one
-  crossing), so that ID switches can be read per crossing.
+  crossing), so that ID switches can be read per crossing: an ID switch of a UAV within
+  ``CROSSING_WINDOW_S`` of the closest approach of one of its crossings counts for the
+  nearest such crossing in time (:func:`crossing_switches`); a crossing with more than one
+  (a swap of two tracks is two: one per UAV) is one the tracker did not get through cleanly.
 
 Pooled per profile (:func:`pool_multi`): mean GOSPA over all epochs, coverage over all
 (UAV, airborne epoch) pairs and its worst single UAV of a single flight, radar-observable
-coverage (all UAVs, and the silent ones), ID switches and crossings, false-track seconds as a
+coverage (all UAVs, and the silent ones), ID switches, crossings and the crossings with more
+than one ID switch (on GOSPA's per-epoch assignment and on the kept CLEAR MOT
+correspondence), false-track seconds as a
 share of the flights' time, and the tracker's run time.
 """
 
@@ -57,6 +62,7 @@ FloatArray = npt.NDArray[np.float64]
 
 CROSSING_M = 50.0  # two UAVs passing closer than this cross
 CROSSING_GAP_S = 20.0  # closest approaches of one pair closer in time than this are one
+CROSSING_WINDOW_S = 10.0  # an ID switch this close to a crossing's closest approach is its
 CSV_FILE = "per_flight_multi.csv"
 FIGURE_FILE = "bench_multi.png"
 FIGURE_DPI = 110
@@ -192,6 +198,27 @@ def multi_score_task(task: MultiScoreTask) -> MultiFlightResult:
     )
 
 
+def crossing_switches(
+    r: MultiFlightResult, kept: bool, window_s: float = CROSSING_WINDOW_S
+) -> tuple[list[int], int]:
+    """Per crossing of the flight (in ``r.crossings`` order), the ID switches attributed to it,
+    and the number of switches near no crossing: each switch of a UAV (GOSPA's per-epoch
+    assignment, or with ``kept`` the CLEAR MOT correspondence) goes to the crossing of that
+    UAV whose closest approach is nearest in time, if within ``window_s``."""
+    counts = [0] * len(r.crossings)
+    away = 0
+    for u in r.samples.uavs:
+        times = u.switch_times_kept if kept else u.switch_times
+        mine = [(i, c[2]) for i, c in enumerate(r.crossings) if u.name in (c[0], c[1])]
+        for ts in times.tolist():
+            near = [(abs(ts - tc), i) for i, tc in mine if abs(ts - tc) <= window_s]
+            if near:
+                counts[min(near)[1]] += 1
+            else:
+                away += 1
+    return counts, away
+
+
 def _near(times: FloatArray, labels: FloatArray, window: float) -> npt.NDArray[np.bool_]:
     """Per time: a label lies within ``window`` of it (``labels`` sorted)."""
     if times.size == 0 or labels.size == 0:
@@ -222,6 +249,8 @@ class MultiBenchScore:
     id_switches: int  # on GOSPA's assignment per epoch
     id_switches_kept: int  # on the CLEAR MOT correspondence (core/multiscore.py)
     crossings: int
+    crossings_over_one: int  # crossings with more than one ID switch (per-epoch assignment)
+    crossings_over_one_kept: int  # ... on the kept correspondence
     false_track_s: float
     false_track_pct: float  # of the flights' scored time
     run_s: float  # the tracker's wall time, all flights
@@ -236,6 +265,10 @@ def _pct(num: int, den: int) -> float:
 
 def _uav_coverage(r: MultiFlightResult) -> list[float]:
     return [_pct(u.assigned, u.epochs) for u in r.samples.uavs if u.epochs > 0]
+
+
+def _over_one(r: MultiFlightResult, kept: bool) -> int:
+    return sum(n > 1 for n in crossing_switches(r, kept)[0])
 
 
 def pool_multi(results: Sequence[MultiFlightResult]) -> dict[str, MultiBenchScore]:
@@ -269,6 +302,8 @@ def pool_multi(results: Sequence[MultiFlightResult]) -> dict[str, MultiBenchScor
             id_switches=sc.id_switches,
             id_switches_kept=sc.id_switches_kept,
             crossings=sum(len(r.crossings) for r in rs),
+            crossings_over_one=sum(_over_one(r, kept=False) for r in rs),
+            crossings_over_one_kept=sum(_over_one(r, kept=True) for r in rs),
             false_track_s=sc.false_track_s,
             false_track_pct=100.0 * sc.false_track_s / flight_s if flight_s > 0 else math.nan,
             run_s=sum(r.run_s for r in rs),
@@ -286,6 +321,8 @@ _COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("id_switches", "ID switches", "{}"),
     ("id_switches_kept", "ID switches, kept correspondence", "{}"),
     ("crossings", "crossings", "{}"),
+    ("crossings_over_one", "crossings with > 1 ID switch", "{}"),
+    ("crossings_over_one_kept", "crossings with > 1 ID switch, kept corr.", "{}"),
     ("false_track_pct", "false-track time (%)", "{:.2f}"),
     ("err_mean_m", "error mean (m)", "{:.1f}"),
     ("err_p95_m", "error p95 (m)", "{:.1f}"),
@@ -316,7 +353,7 @@ def text_multi(scores: Mapping[str, MultiBenchScore]) -> str:
     for s in scores.values():
         lines.append(f"{s.profile} ({s.flights} flights):")
         for k, h, f in _COLUMNS:
-            lines.append(f"  {h:<30} {_fmt(f, getattr(s, k))}")
+            lines.append(f"  {h:<42} {_fmt(f, getattr(s, k))}")
     return "\n".join(lines)
 
 
@@ -354,7 +391,8 @@ def write_multi_csv(results: Sequence[MultiFlightResult], path: Path) -> Path:
                 "coverage_pct", "observable_epochs", "observable_coverage_pct", "err_mean_m",
                 "err_p95_m", "id_switches", "id_switches_kept", "fragmentations",
                 "flight_gospa_mean_m",
-                "flight_false_track_s", "flight_crossings", "run_s",
+                "flight_false_track_s", "flight_crossings", "flight_crossings_over_one",
+                "flight_crossings_over_one_kept", "run_s",
             ]
         )  # fmt: skip
         for r in results:
@@ -370,7 +408,8 @@ def write_multi_csv(results: Sequence[MultiFlightResult], path: Path) -> Path:
                         f"{us.err_mean_m:.3f}", f"{us.err_p95_m:.3f}", us.id_switches,
                         us.id_switches_kept, us.fragmentations, f"{fl.gospa_mean_m:.3f}",
                         f"{fl.false_track_s:.1f}",
-                        len(r.crossings), f"{r.run_s:.4f}",
+                        len(r.crossings), _over_one(r, kept=False), _over_one(r, kept=True),
+                        f"{r.run_s:.4f}",
                     ]
                 )  # fmt: skip
     return path
