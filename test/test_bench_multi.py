@@ -16,6 +16,7 @@ from uav_fusion.cli import main
 from uav_fusion.core.bench.cache import cached_flights
 from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.bench.multi import (
+    Crossing,
     MultiFlightResult,
     MultiScoreTask,
     UavOutcome,
@@ -88,8 +89,10 @@ def test_crossings_are_closest_approaches_of_airborne_uavs() -> None:
     flight = Flight("x", a, [], [], vehicles={"uav1": a, "uav2": b})
     got = crossings(flight)
     assert len(got) == 1
-    name_a, name_b, when = got[0]
+    name_a, name_b, when, t_close, t_apart = got[0]
     assert (name_a, name_b) == ("uav1", "uav2") and when == pytest.approx(100.0, abs=0.5)
+    # closer than 100 m while 200 (t - 100)^2 + 64 < 100^2: |t - 100| < 7.05 s
+    assert t_close == pytest.approx(93.0, abs=0.3) and t_apart == pytest.approx(107.0, abs=0.3)
     far = _fixes(t, 0.0 * t + 150.0, 10.0 * (t - 100.0), up)
     assert crossings(Flight("x", a, [], [], vehicles={"uav1": a, "uav2": far})) == []
 
@@ -126,7 +129,8 @@ def test_id_switches_are_attributed_to_the_crossing_they_happen_at() -> None:
     res = MultiFlightResult(
         flight_id="pass", plan="pass", seed=0, split="test", profile="tracker",
         samples=samples, uavs=(UavOutcome("a", False, 0, 0), UavOutcome("b", True, 0, 0)),
-        crossings=(("a", "b", t0 + 20.0),), flight_s=81.0, run_s=0.0,
+        crossings=(Crossing("a", "b", t0 + 20.0, t0 + 15.0, t0 + 25.0),), flight_s=81.0,
+        run_s=0.0,
     )  # fmt: skip
     ua, ub = samples.uavs
     assert (ua.switch_times - t0).tolist() == [20.0, 60.0]
@@ -135,11 +139,18 @@ def test_id_switches_are_attributed_to_the_crossing_they_happen_at() -> None:
     assert 20.0 < ub.switch_times_kept[0] - t0 <= 26.0
     assert crossing_switches(res, kept=False) == ([2], 1)
     assert crossing_switches(res, kept=True) == ([2], 1)
-    # the same switches with the crossing elsewhere in time (or of other UAVs) are all away
-    far = MultiFlightResult(**{**res.__dict__, "crossings": (("a", "b", t0 + 45.0),)})
+    # the same switches with the crossing elsewhere in time (or of other UAVs) are away ...
+    def with_crossing(c: Crossing) -> MultiFlightResult:
+        return MultiFlightResult(**{**res.__dict__, "crossings": (c,)})
+
+    far = with_crossing(Crossing("a", "b", t0 + 45.0, t0 + 44.0, t0 + 46.0))
     assert crossing_switches(far, kept=False) == ([0], 3)
-    other = MultiFlightResult(**{**res.__dict__, "crossings": (("a", "c", t0 + 20.0),)})
+    other = with_crossing(Crossing("a", "c", t0 + 20.0, t0 + 15.0, t0 + 25.0))
     assert crossing_switches(other, kept=False) == ([1], 2)
+    # ... and a switch counts for a crossing whose span (UAVs within 100 m) reaches it, however
+    # long before the closest approach was
+    late = with_crossing(Crossing("a", "b", t0 + 0.0, t0 - 5.0, t0 + 18.0))
+    assert crossing_switches(late, kept=False) == ([2], 1)
     sc = pool_multi([res])["tracker"]
     assert (sc.crossings, sc.crossings_over_one, sc.crossings_over_one_kept) == (1, 1, 1)
     assert (sc.id_switches, sc.id_switches_kept) == (3, 3)

@@ -63,7 +63,7 @@ def _ids(run: Run, name: str, lo: float, hi: float) -> set[int | None]:
 def test_two_uavs_crossing_10_to_20_m_apart_keep_their_ids(pair: Run) -> None:
     cross = crossings(pair.flight)
     assert len(cross) == 2  # the plan's two co-altitude crossings
-    for a, b, t in cross:
+    for a, b, t, _, _ in cross:
         before_a, before_b = _ids(pair, a, t - 20.0, t - 3.0), _ids(pair, b, t - 20.0, t - 3.0)
         after_a, after_b = _ids(pair, a, t + 3.0, t + 20.0), _ids(pair, b, t + 3.0, t + 20.0)
         assert len(before_a) == len(before_b) == 1 and None not in before_a | before_b

@@ -11,10 +11,14 @@ false-track seconds). It adds what only the twin knows:
   silent UAV (no control link, radar only) this is the figure that matters;
 * **crossings**: the times two airborne UAVs pass within ``CROSSING_M`` of each other (a local
   minimum of their 3D distance, from the truth; minima closer than ``CROSSING_GAP_S`` are one
-  crossing), so that ID switches can be read per crossing: an ID switch of a UAV within
-  ``CROSSING_WINDOW_S`` of the closest approach of one of its crossings counts for the
-  nearest such crossing in time (:func:`crossing_switches`); a crossing with more than one
-  (a swap of two tracks is two: one per UAV) is one the tracker did not get through cleanly.
+  crossing), so that ID switches can be read per crossing. A crossing's *span* runs from the
+  time the two UAVs came within ``CROSSING_SPAN_M`` (GOSPA's cut-off) of each other to the
+  time they were that far apart again: a track that swaps UAVs at the crossing leaves its UAV
+  by the cut-off there at the latest, so the kept (CLEAR MOT) correspondence counts the swap
+  then. An ID switch of a UAV inside the span of one of its crossings, widened by
+  ``CROSSING_WINDOW_S`` on each side, counts for that crossing (the one with the nearest
+  closest approach if several; :func:`crossing_switches`); a crossing with more than one (a
+  swap of two tracks is two: one per UAV) is one the tracker did not get through cleanly.
 
 Pooled per profile (:func:`pool_multi`): mean GOSPA over all epochs, coverage over all
 (UAV, airborne epoch) pairs and its worst single UAV of a single flight, radar-observable
@@ -33,7 +37,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -62,10 +66,21 @@ FloatArray = npt.NDArray[np.float64]
 
 CROSSING_M = 50.0  # two UAVs passing closer than this cross
 CROSSING_GAP_S = 20.0  # closest approaches of one pair closer in time than this are one
-CROSSING_WINDOW_S = 10.0  # an ID switch this close to a crossing's closest approach is its
+CROSSING_SPAN_M = 100.0  # a crossing's span: the two UAVs closer than this (module text)
+CROSSING_WINDOW_S = 10.0  # ... widened by this on each side for its ID switches
 CSV_FILE = "per_flight_multi.csv"
 FIGURE_FILE = "bench_multi.png"
 FIGURE_DPI = 110
+
+
+class Crossing(NamedTuple):
+    """Two airborne UAVs passing each other (module text)."""
+
+    a: str
+    b: str
+    t: float  # closest approach
+    t_close: float  # the span: from the last time before ``t`` they were CROSSING_SPAN_M apart
+    t_apart: float  # ... to the first time after ``t`` they were that far apart again
 
 
 @dataclass(frozen=True)
@@ -97,7 +112,7 @@ class MultiFlightResult:
     profile: str
     samples: FlightSamples
     uavs: tuple[UavOutcome, ...]
-    crossings: tuple[tuple[str, str, float], ...]  # (uav, uav, time of closest approach)
+    crossings: tuple[Crossing, ...]
     flight_s: float  # the scored span (epochs x grid step)
     run_s: float  # wall time of the tracker run alone
 
@@ -120,8 +135,9 @@ def silent_vehicles(folder: Path) -> set[str]:
 
 def crossings(
     flight: Flight, step_s: float = 0.5, within_m: float = CROSSING_M
-) -> list[tuple[str, str, float]]:
-    """Closest approaches of two airborne UAVs below ``within_m`` (see the module text)."""
+) -> list[Crossing]:
+    """Closest approaches of two airborne UAVs below ``within_m``, with their spans (see the
+    module text)."""
     names = list(flight.vehicles)
     tracks = {v: flight.truth_arrays(v) for v in names}
     spans = [t for t, _ in tracks.values() if t.size >= 2]
@@ -137,7 +153,7 @@ def crossings(
         pos[v] = interpolate_truth(t, enu, grid, max_gap_s=2.0)
         with np.errstate(invalid="ignore"):
             air[v] = np.asarray(pos[v][:, 2] - enu[0, 2] > 5.0, dtype=bool)
-    out: list[tuple[str, str, float]] = []
+    out: list[Crossing] = []
     live = list(pos)
     for i, a in enumerate(live):
         for b in live[i + 1 :]:
@@ -150,9 +166,20 @@ def crossings(
                 if d[k] <= d[k - 1] and d[k] <= d[k + 1]:
                     tk = float(grid[k])
                     if tk - last >= CROSSING_GAP_S:
-                        out.append((a, b, tk))
+                        lo, hi = _span(ok & (d < CROSSING_SPAN_M), k)
+                        out.append(Crossing(a, b, tk, float(grid[lo]), float(grid[hi])))
                     last = tk
     return out
+
+
+def _span(near: npt.NDArray[np.bool_], k: int) -> tuple[int, int]:
+    """The run of ``near`` around index ``k`` (``near[k]`` true), as first and last index."""
+    lo, hi = k, k
+    while lo > 0 and near[lo - 1]:
+        lo -= 1
+    while hi < near.size - 1 and near[hi + 1]:
+        hi += 1
+    return lo, hi
 
 
 def multi_score_task(task: MultiScoreTask) -> MultiFlightResult:
@@ -202,16 +229,21 @@ def crossing_switches(
     r: MultiFlightResult, kept: bool, window_s: float = CROSSING_WINDOW_S
 ) -> tuple[list[int], int]:
     """Per crossing of the flight (in ``r.crossings`` order), the ID switches attributed to it,
-    and the number of switches near no crossing: each switch of a UAV (GOSPA's per-epoch
+    and the number of switches at no crossing: each switch of a UAV (GOSPA's per-epoch
     assignment, or with ``kept`` the CLEAR MOT correspondence) goes to the crossing of that
-    UAV whose closest approach is nearest in time, if within ``window_s``."""
+    UAV whose span, widened by ``window_s`` on each side, holds it (the one with the nearest
+    closest approach if several)."""
     counts = [0] * len(r.crossings)
     away = 0
     for u in r.samples.uavs:
         times = u.switch_times_kept if kept else u.switch_times
-        mine = [(i, c[2]) for i, c in enumerate(r.crossings) if u.name in (c[0], c[1])]
+        mine = [c for c in enumerate(r.crossings) if u.name in (c[1].a, c[1].b)]
         for ts in times.tolist():
-            near = [(abs(ts - tc), i) for i, tc in mine if abs(ts - tc) <= window_s]
+            near = [
+                (abs(ts - c.t), i)
+                for i, c in mine
+                if c.t_close - window_s <= ts <= c.t_apart + window_s
+            ]
             if near:
                 counts[min(near)[1]] += 1
             else:
