@@ -458,8 +458,24 @@ def write_multi_figure(results: Sequence[MultiFlightResult], path: Path) -> Path
     first = [r for r in results if r.profile == profiles[0]] if profiles else []
     for r in first:
         d = r.samples.distance
-        ax_g.plot(np.arange(d.size) * r.samples.step_s, d, lw=0.8, label=r.flight_id)
-    ax_g.set_xlabel("time since the first truth sample (s)")
+        (line,) = ax_g.plot(np.arange(d.size) * r.samples.step_s, d, lw=0.8, label=r.flight_id)
+        # each crossing at its closest approach, with its ID switches on the kept correspondence
+        if not r.samples.assignments:
+            continue
+        t0 = r.samples.assignments[0].t  # the first epoch: x = 0
+        for c, sw in zip(r.crossings, crossing_switches(r, kept=True)[0], strict=True):
+            xc = c.t - t0
+            ax_g.axvline(xc, color=line.get_color(), lw=0.6, ls=":", alpha=0.8)
+            if sw:
+                ax_g.annotate(
+                    f"{sw} sw", (xc, 1.0), xycoords=("data", "axes fraction"), fontsize=6,
+                    color=line.get_color(), ha="center", va="bottom",
+                )  # fmt: skip
+    ax_g.set_xlabel(
+        "time since the first truth sample (s); dotted: crossings, with their ID switches "
+        "(kept correspondence)",
+        fontsize=8,
+    )
     ax_g.set_ylabel(f"GOSPA ({profiles[0] if profiles else ''}), m", fontsize=8)
     ax_g.grid(True, alpha=0.3)
     if first:
