@@ -516,6 +516,7 @@ def score_flight(
         kept.step(float(grid_t[k]), present, X, track_ids, Y)
         assignments.append(EpochAssignment(float(grid_t[k]), tuple(pairs), false_ids))
 
+    sw = {name: id_switch_indices(ids[name]) for name in names}
     uavs = tuple(
         UavSamples(
             name=name,
@@ -523,11 +524,11 @@ def score_flight(
             assigned=len(errs[name]),
             errors=np.asarray(errs[name], dtype=float),
             track_ids=tuple(ids[name]),
-            id_switches=len(sw := id_switch_indices(ids[name])),
+            id_switches=len(sw[name]),
             fragmentations=fragmentations(ids[name]),
             times=np.asarray(when[name], dtype=float),
             id_switches_kept=len(kept.switches.get(name, [])),
-            switch_times=np.asarray([when[name][k] for k in sw], dtype=float),
+            switch_times=np.asarray([when[name][k] for k in sw[name]], dtype=float),
             switch_times_kept=np.asarray(kept.switches.get(name, []), dtype=float),
         )
         for name in names

@@ -237,7 +237,7 @@ def crossing_switches(
     away = 0
     for u in r.samples.uavs:
         times = u.switch_times_kept if kept else u.switch_times
-        mine = [c for c in enumerate(r.crossings) if u.name in (c[1].a, c[1].b)]
+        mine = [(i, c) for i, c in enumerate(r.crossings) if u.name in (c.a, c.b)]
         for ts in times.tolist():
             near = [
                 (abs(ts - c.t), i)
@@ -430,6 +430,7 @@ def write_multi_csv(results: Sequence[MultiFlightResult], path: Path) -> Path:
         for r in results:
             fl = pool([r.samples])
             per = {u.name: u for u in fl.uavs}
+            over = (_over_one(r, kept=False), _over_one(r, kept=True))
             for u in r.uavs:
                 us = per[u.name]
                 w.writerow(
@@ -440,7 +441,7 @@ def write_multi_csv(results: Sequence[MultiFlightResult], path: Path) -> Path:
                         f"{us.err_mean_m:.3f}", f"{us.err_p95_m:.3f}", us.id_switches,
                         us.id_switches_kept, us.fragmentations, f"{fl.gospa_mean_m:.3f}",
                         f"{fl.false_track_s:.1f}",
-                        len(r.crossings), _over_one(r, kept=False), _over_one(r, kept=True),
+                        len(r.crossings), *over,
                         f"{r.run_s:.4f}",
                     ]
                 )  # fmt: skip
