@@ -93,6 +93,11 @@ def _imm(**changes: Any) -> dict[str, Any]:
             lambda d: d["measurement"]["radar"].update(low_el_deg=0.0),
             r"measurement\.radar\.low_el_deg must be > 0",
         ),
+        (
+            lambda d: d["gating"].update(far_gate_m=1200.0),
+            r"gating\.far_gate_m \(1200\) must exceed gating\.range_gate_m \(1500\)",
+        ),
+        (lambda d: d["gating"].update(far_gate_m=-1.0), r"gating\.far_gate_m must be > 0"),
     ],
 )
 def test_tracker_profile_errors_name_file_and_key(
@@ -327,6 +332,81 @@ def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
     assert restart and gap[1] <= restart[0].t < gap[1] + 3.0
     later = [s for s in steps if s.counted and s.t > gap[1] + 5.0]
     assert later and max(sc.error(s) for s in later) < 40.0
+
+
+class OutboundScene(Scene):
+    """The UAV flies out from 600 m to 2100 m from the radar (15 m/s) and back, at 50 m height;
+    beyond 1500 m its reports carry a +150 m elevation error (low-elevation multipath) and RF
+    is silent."""
+
+    def uav(self, t: float) -> np.ndarray:
+        out = 600.0 + 15.0 * min(max(0.0, t - 40.0), 100.0, max(0.0, 260.0 - t))
+        a = 0.3 + 0.0005 * t
+        return self.r0 + np.array([out * math.cos(a), out * math.sin(a), 50.0])
+
+    def far(self, p: np.ndarray) -> bool:
+        return float(np.linalg.norm(p[:2] - self.r0[:2])) > 1500.0
+
+    def build_far(self, duration_s: float) -> None:
+        self.build(duration_s, rf_ok=lambda t: not self.far(self.uav(t)))
+        lifted = []
+        for f in self.frames:
+            tracks = tuple(
+                dataclasses.replace(trk, u=trk.u + 150.0)
+                if self.far(np.array([trk.e, trk.n, trk.u]))
+                else trk
+                for trk in f.tracks
+            )
+            lifted.append(RadarFrame(f.t, tracks))
+        self.frames = lifted
+
+
+def test_far_gate_keeps_the_track_beyond_the_range_gate_with_horizontal_updates(
+    site: Site,
+) -> None:
+    sc = OutboundScene(site, seed=11)
+    sc.build_far(300.0)
+    base = load_profile("tracker")
+    assert base.range_gate_m == 1500.0 and base.far_gate_m is None
+    far = base.with_changes(far_gate_m=2500.0)
+    far_s = [(t, p) for t, p in sc.truth.items() if sc.far(p)]
+    t0, t1 = far_s[0][0], far_s[-1][0]  # about 100 s beyond the range gate
+    assert t1 - t0 > 90.0
+
+    # without a far gate the reports out there are discarded and the track times out
+    tr, steps = _run(sc, site)
+    out = [s for s in steps if s.source == "radar" and t0 + 1 <= s.t <= t1 - 1]
+    assert out and all(s.reason == "range_gate" for s in out)
+    assert tr.counters.get("reinit_max_coast", 0) == 1
+
+    # with it they update the track horizontally (2D z), the height is held, one track
+    tr2 = Tracker(far, site)
+    steps2 = run_tracker(tr2, sc.stream())
+    used = [s for s in steps2 if s.updated and s.source == "radar" and t0 + 1 <= s.t <= t1 - 1]
+    assert len(used) > 0.95 * 4 * (t1 - t0 - 2)
+    assert all(len(s.z) == 2 for s in used)
+    assert tr2.counters.get("reinitialisations", 0) == 0
+    assert tr2.counters.get("vz_hold", 0) > 0
+    err = [s.x[:3] - sc.truth[round(s.t * 4) / 4] for s in used]
+    assert max(abs(float(e[2])) for e in err) < 30.0  # the +150 m elevation error never got in
+    assert max(float(np.hypot(e[0], e[1])) for e in err) < 40.0
+    # inside the range gate nothing changes: the same steps up to the first far report
+    first_far = min(s.t for s in steps2 if s.source == "radar" and len(s.z) == 2)
+    before = [(s.status, s._state) for s in steps if s.t < first_far]
+    assert before == [(s.status, s._state) for s in steps2 if s.t < first_far]
+
+
+def test_reports_beyond_the_range_gate_never_start_a_track(site: Site) -> None:
+    sc = OutboundScene(site, seed=12)
+    sc.build_far(300.0)
+    start = min(t for t, p in sc.truth.items() if sc.far(p)) + 5.0
+    sc.frames = [f for f in sc.frames if f.t >= start]  # the radar sees it only out there
+    sc.fixes = []
+    far = load_profile("tracker").with_changes(far_gate_m=2500.0)
+    steps = run_tracker(Tracker(far, site), sc.stream())
+    out = [s for s in steps if sc.far(sc.truth[round(s.t * 4) / 4])]
+    assert out and not any(s.counted for s in out)
+    assert {s.reason for s in out} == {"range_gate"}
 
 
 def test_fixed_rate_accessors(site: Site) -> None:

@@ -43,6 +43,7 @@ class Profile:
     r_radar: FloatArray  # 3x3, m^2
     r_rf: FloatArray  # 2x2, m^2
     range_gate_m: float | None = 800.0  # None: the site's radar.range_gate_m
+    far_gate_m: float | None = None  # horizontal-only radar updates out to this range
     nis_probability: float = 0.95
     min_uav_prob: float | None = None
     radar_selection: str = "largest_track"
@@ -120,6 +121,7 @@ class Profile:
             },
             "gating": {
                 "range_gate_m": self.range_gate_m,
+                "far_gate_m": self.far_gate_m,
                 "nis_probability": self.nis_probability,
                 "min_uav_prob": self.min_uav_prob,
             },
@@ -206,7 +208,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "update": ("robust", "dof", "huber_k", "vz_hold_after_s", "vz_hold_sigma_mps"),
     "association": ("mode", *score_keys()),
     "smoother": ("lag_s",),
-    "gating": ("range_gate_m", "nis_probability", "min_uav_prob"),
+    "gating": ("range_gate_m", "far_gate_m", "nis_probability", "min_uav_prob"),
     "sources": (RADAR, RF),
     "track": (
         "init_sources",
@@ -283,6 +285,16 @@ def _validate(p: Profile, where: str) -> None:
             raise ConfigError(f"{w}: must be positive definite")
     if p.range_gate_m is not None and not p.range_gate_m > 0:
         raise ConfigError(f"{where}: gating.range_gate_m must be > 0 or null")
+    if p.far_gate_m is not None:
+        if not p.far_gate_m > 0:
+            raise ConfigError(f"{where}: gating.far_gate_m must be > 0 or null")
+        if p.range_gate_m is not None and not p.far_gate_m > p.range_gate_m:
+            raise ConfigError(
+                f"{where}: gating.far_gate_m ({p.far_gate_m:g}) must exceed "
+                f"gating.range_gate_m ({p.range_gate_m:g})"
+            )
+        if not p.uses_tracker:
+            raise ConfigError(f"{where}: gating.far_gate_m needs association.mode track_score")
     if not 0 < p.nis_probability < 1:
         raise ConfigError(f"{where}: gating.nis_probability must lie in (0, 1)")
     if p.min_uav_prob is not None and not 0 <= p.min_uav_prob <= 1:
@@ -472,6 +484,7 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         r_radar=_matrix(radar["R"], 3, f"{where}: measurement.radar.R"),
         r_rf=_matrix(rf["R"], 2, f"{where}: measurement.rf.R"),
         range_gate_m=_opt_float(gating, "range_gate_m", f"{where}: gating", 800.0),
+        far_gate_m=_opt_float(gating, "far_gate_m", f"{where}: gating", None),
         nis_probability=_float(gating, "nis_probability", f"{where}: gating", 0.95),
         min_uav_prob=min_prob,
         radar_selection=selection,

@@ -12,7 +12,10 @@ Per radar frame (all reports share one time):
    happens to it; non-finite reports are discarded (``invalid``);
 2. with a track: the deleter may drop it (``max_coast``); otherwise it is predicted to the
    frame's time once;
-3. reports beyond the range gate are discarded (``range_gate``);
+3. reports beyond the range gate are discarded (``range_gate``), except, with
+   ``far_gate_m`` and a confirmed track, those inside the far gate: they stay candidates for
+   the confirmed track (step 4) with their horizontal position only (R's horizontal block;
+   the vertical velocity is held near zero as for RF fixes), never start or confirm a track;
 4. confirmed track: a report is *eligible* when its object's score is at least
    ``follow_min``; of the eligible reports inside the NIS gate the one with the smallest
    ``NIS - 2 score`` (global nearest neighbour with the score as prior log-odds) updates the
@@ -228,6 +231,9 @@ class Tracker:
         self._g3 = nis_gate(profile.nis_probability, 3)
         gate = profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
         self._gate2 = float(gate) ** 2
+        far = profile.far_gate_m
+        self._far2 = float(far) ** 2 if far is not None and far > gate else 0.0  # 0: none
+        self._far: set[int] = set()  # this frame's reports beyond the range gate, kept 2D
         self._radar_pos = tuple(float(v) for v in site.radar.enu)
         self.filter: MotionFilter | None = None
         self.t: float | None = None
@@ -416,10 +422,20 @@ class Tracker:
         gate2 = self._gate2
         cfg = self.cfg
         skip_coasts = cfg.skip_radar_coasts
+        far2 = self._far2 if self.confirmed else 0.0
+        far = self._far
+        far.clear()
         for i, trk, obj, r in objs:
             rs[i] = r
             d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
             if d2 > gate2:
+                if d2 <= far2 and not (obj.coasting and skip_coasts):
+                    # inside the far gate: a horizontal-only candidate for the confirmed
+                    # track (R's horizontal block; the elevation is too poor out there)
+                    far.add(i)
+                    rs[i] = (r[0], r[1], r[3])
+                    cands.append((i, trk, obj, obj.score(cfg)))
+                    continue
                 z = (trk.e, trk.n, trk.u)
                 out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, z, trk.track_id)
             elif obj.coasting and skip_coasts:
@@ -448,13 +464,22 @@ class Tracker:
             nis3 = f.kf.nis3 if isinstance(f, CvFilter) else None
             mark = self.objects.mark_fused if self.confirmed else None
             fused_nis = cfg.fused_nis
+            far = self._far
+            g2 = self._g2
             for i, trk, obj, s in cands:
-                z = (trk.e, trk.n, trk.u)
                 r = rs[i]
-                nis = nis3(z[0], z[1], z[2], r) if nis3 is not None else f.nis(z, r)
+                z: tuple[float, ...]
+                if far and i in far:
+                    z = (trk.e, trk.n)
+                    nis = f.nis(z, r)
+                    inside = nis <= g2
+                else:
+                    z = (trk.e, trk.n, trk.u)
+                    nis = nis3(z[0], z[1], z[2], r) if nis3 is not None else f.nis(z, r)
+                    inside = nis <= g
                 if mark is not None:
                     mark(obj, nis <= fused_nis, t)
-                scored.append((i, trk, obj, s, z, r, nis, nis <= g))
+                scored.append((i, trk, obj, s, z, r, nis, inside))
             if not self.confirmed:
                 # a tentative RF track: only an object strong enough to start a track may
                 # confirm it (inside its gate) or supersede it (_initiate)
@@ -483,11 +508,14 @@ class Tracker:
             if in_gate:
                 best = min(in_gate, key=lambda e: (e[6] - 2.0 * e[3], e[0]))
                 i, trk, obj, s, z, r, nis, _ = best
-                w = self.robust.weight(nis, 3)
+                w = self.robust.weight(nis, len(z))
+                if len(z) == 2:
+                    self._hold_vz(t, f)
                 f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
                 res.append((i, self._used(t, RADAR, nis, z, trk.track_id, s, w)))
                 self.followed = trk.track_id
-                self.last_3d_t = t
+                if len(z) == 3:
+                    self.last_3d_t = t
                 for e in scored:
                     if e is not best:
                         why = "not_selected" if e[3] >= cfg.follow_min else "score"
@@ -536,10 +564,13 @@ class Tracker:
         self, t: float, cands: list[tuple[int, RadarTrack, RadarObject, float]]
     ) -> list[tuple[int, TrackerStep]]:
         cfg = self.cfg
+        far = self._far
         ok = [
             e
             for e in cands
-            if e[3] >= cfg.init_min and e[2].n_reports >= cfg.init_min_reports
+            if e[3] >= cfg.init_min
+            and e[2].n_reports >= cfg.init_min_reports
+            and not (far and e[0] in far)
         ]
         res: list[tuple[int, TrackerStep]] = []
         best = max(ok, key=lambda e: (e[3], -e[0])) if ok else None
@@ -630,19 +661,22 @@ class Tracker:
             return [self._start_rf(t, z, r)]
         if not self.confirmed:
             return [self._tentative_test(t, z, r)]
-        hold = self.profile.vz_hold_after_s
-        if hold is not None and (self.last_3d_t is None or t - self.last_3d_t > hold):
-            # no 3D measurement for a while: the vertical velocity is unobservable from 2D
-            # fixes, hold it near zero instead of letting a stale climb rate run away
-            sd = self.profile.vz_hold_sigma_mps
-            f.update_scalar(5, 0.0, sd * sd)
-            self._count("vz_hold")
+        self._hold_vz(t, f)
         nis = f.nis(z, r)
         if nis <= self._g2:
             w = self.robust.weight(nis, 2)
             f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             return [self._used(t, RF, nis, z, None, None, w)]
         return [self._rejected(t, RF, nis, z, None, None)]
+
+    def _hold_vz(self, t: float, f: MotionFilter) -> None:
+        hold = self.profile.vz_hold_after_s
+        if hold is not None and (self.last_3d_t is None or t - self.last_3d_t > hold):
+            # no 3D measurement for a while: the vertical velocity is unobservable from 2D
+            # measurements, hold it near zero instead of letting a stale climb rate run away
+            sd = self.profile.vz_hold_sigma_mps
+            f.update_scalar(5, 0.0, sd * sd)
+            self._count("vz_hold")
 
     def _start_rf(self, t: float, z: tuple[float, ...], r: PackedR) -> TrackerStep:
         p = self.profile
