@@ -98,6 +98,10 @@ def _imm(**changes: Any) -> dict[str, Any]:
             r"gating\.far_gate_m \(1200\) must exceed gating\.range_gate_m \(1500\)",
         ),
         (lambda d: d["gating"].update(far_gate_m=-1.0), r"gating\.far_gate_m must be > 0"),
+        (
+            lambda d: d["association"].update(below_ground_sigmas=-1.0),
+            r"association\.below_ground_sigmas must be >= 0",
+        ),
     ],
 )
 def test_tracker_profile_errors_name_file_and_key(
@@ -515,6 +519,31 @@ def test_streaming_equals_the_offline_run_bit_for_bit(site: Site) -> None:
     for a, b in zip(live, offline, strict=True):
         assert (a.t, a.status, a.reason, a.track_id) == (b.t, b.status, b.reason, b.track_id)
         assert a._state == b._state  # the packed doubles: bit-identical
+
+
+@pytest.mark.parametrize(
+    ("height_m", "sd_up_m", "sigmas", "ghost"),
+    [
+        (-20.0, 40.0, 0.0, True),  # 20 m below: beyond below_ground_m (5 m)
+        (-20.0, 40.0, 1.0, False),  # ... but inside its reports' vertical sigma (a low pass)
+        (-60.0, 15.0, 1.0, True),  # a mirror image well below its sigma
+        (-3.0, 1.0, 1.0, False),  # never closer than below_ground_m
+    ],
+)
+def test_below_ground_means_beyond_the_reports_vertical_sigma(
+    height_m: float, sd_up_m: float, sigmas: float, ghost: bool
+) -> None:
+    cfg = dataclasses.replace(ScoreConfig(), below_ground_sigmas=sigmas)
+    table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, sd_up_m**2)))
+    for k in range(8):
+        obj = table.update(
+            RadarTrack(10.0 + 0.25 * k, 1, 0.0, 0.0, 0.0, 400.0, 300.0, height_m,
+                       (0.0, 5.0, 0.0), 0.5, None, -10.0)
+        )  # fmt: skip
+    assert obj.sd_up == pytest.approx(sd_up_m)
+    assert obj.below_ground(cfg) is ghost
+    base = dataclasses.replace(cfg, below_ground_weight=0.0)
+    assert obj.score(cfg) == pytest.approx(obj.score(base) - (8.0 if ghost else 0.0))
 
 
 @pytest.mark.parametrize("nearest_only", [False, True])

@@ -7,13 +7,16 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
 
 * class history: exponential moving average (time constant ``class_tau_s``) of the logit of
   the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``;
-* kinematics: an object more than ``below_ground_m`` below the ground (ENU up 0) is a
-  multipath ghost (``-below_ground_weight``); one older than ``stationary_min_age_s`` whose
-  mean speed stays below ``stationary_speed_mps`` is clutter (``-stationary_weight``); one
-  that moves but stays below ``ground_alt_m`` is a ground vehicle (``-ground_weight``); one
-  whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
-  ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
-  bird (``-erratic_weight``);
+* kinematics: an object whose mean height (moving average of its reports' ENU up) lies
+  below the ground by more than ``below_ground_m``, and by more than ``below_ground_sigmas``
+  times the mean vertical standard deviation of its reports (from the radar's polar R: a few
+  metres close in, tens of metres near the horizon far out, where a UAV's low pass scatters
+  below the ground), is a multipath ghost (``-below_ground_weight``); one older than
+  ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is
+  clutter (``-stationary_weight``); one that moves but stays below ``ground_alt_m`` is a
+  ground vehicle (``-ground_weight``); one whose own filter's mean NIS (3 dof, with the
+  radar's polar R but a floor of ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS
+  below ``bird_rcs_dbsm`` is a bird (``-erratic_weight``);
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
   horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
   capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
@@ -58,6 +61,7 @@ class ScoreConfig:
     ground_weight: float = 3.0
     below_ground_m: float = 5.0
     below_ground_weight: float = 8.0
+    below_ground_sigmas: float = 0.0
     erratic_nis: float = 6.0
     bird_rcs_dbsm: float = -15.0
     erratic_weight: float = 2.0
@@ -110,6 +114,7 @@ class RadarObject:
         "rcs_mean",
         "rf_support",
         "rf_t",
+        "sd_up",
         "signature",
         "speed",
         "up",
@@ -124,6 +129,7 @@ class RadarObject:
         self.class_logit = 0.0
         self.speed = 0.0
         self.up = 0.0
+        self.sd_up = 0.0  # moving average of the reports' vertical standard deviation
         self.nis_mean = 3.0
         self.rcs_mean = 0.0
         self.rf_support = 0.0
@@ -142,11 +148,19 @@ class RadarObject:
             return 0.0
         return self.rf_support * math.exp(-(t - self.rf_t) / tau) if tau > 0 else 0.0
 
+    def below_ground(self, cfg: ScoreConfig) -> bool:
+        """Clearly below the ground (see the module text): nothing real flies there."""
+        lim = cfg.below_ground_m
+        k = cfg.below_ground_sigmas
+        if k and k * self.sd_up > lim:
+            lim = k * self.sd_up
+        return self.up < -lim
+
     def score(self, cfg: ScoreConfig) -> float:
         """The UAV score at the object's last report (see the module text)."""
         s = cfg.class_weight * self.class_logit
         age = self.age_s
-        if self.up < -cfg.below_ground_m:  # nothing real flies below the ground: multipath
+        if self.below_ground(cfg):  # a multipath ghost
             s -= cfg.below_ground_weight
         elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
             s -= cfg.stationary_weight
@@ -210,6 +224,7 @@ class ObjectTable:
             ]  # fmt: skip
             dt = 0.0
             obj.up = u
+            obj.sd_up = math.sqrt(r[5])
             obj.rcs_mean = rcs if rcs is not None else 0.0
             # one smoothing factor per time constant for this interval (the EMAs below)
             a = 0.0 if cfg.speed_tau_s <= 0 else 1.0
@@ -235,6 +250,7 @@ class ObjectTable:
         else:
             obj.speed = a * obj.speed + b * spd
             obj.up = a * obj.up + b * u
+            obj.sd_up = a * obj.sd_up + b * math.sqrt(r[5])
             if rcs is not None and math.isfinite(rcs):
                 obj.rcs_mean = a * obj.rcs_mean + b * rcs
         p = trk.uav_prob

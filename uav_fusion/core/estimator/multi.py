@@ -315,7 +315,7 @@ class MultiTracker:
             if flat and trk.u < -cfg.below_ground_m:
                 # the elevation of a low target is the radar's weak point (ground multipath):
                 # range and azimuth still place it; its object without the below-ground term
-                if obj.up < -cfg.below_ground_m:
+                if obj.below_ground(cfg):
                     s += cfg.below_ground_weight
                 z, r = (trk.e, trk.n), (r[0], r[1], r[3])
             if s >= cfg.follow_min:
