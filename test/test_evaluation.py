@@ -195,7 +195,10 @@ def test_bad_inputs_are_counted_by_reason_and_dropped() -> None:
     assert not ev.add_rf_attempt(T0 + 1, True, nan, 1.0)
     assert not ev.add_rf_attempt(nan, False)
     assert not ev.add_validated(T0 + 1, "sonar", [1.0, 2.0, 3.0])
-    assert not ev.add_validated(T0 + 1, "radar", [1.0, 2.0])
+    assert not ev.add_validated(T0 + 1, "radar", [1.0])
+    assert not ev.add_validated(T0 + 1, "radar", [1.0, nan])
+    # a horizontal-only radar measurement (beyond a 3D range gate) is counted, not in the rows
+    assert ev.add_validated(T0 + 1, "radar", [1.0, 2.0])
     assert not ev.add_step(T0 + 1, "updated", [nan, 0.0, 0.0])
     assert not ev.add_step(T0 + 1, "updated", [0.0])
     # a report with unknown RCS is kept (RCS is optional)
@@ -208,13 +211,15 @@ def test_bad_inputs_are_counted_by_reason_and_dropped() -> None:
         "rf: non-finite position": 1,
         "rf: non-finite time": 1,
         "validated: unknown source 'sonar'": 1,
-        "validated radar: 2 values, need 3": 1,
+        "validated radar: 1 values, need 3": 1,
+        "validated radar: non-finite horizontal position": 1,
         "step: non-finite position": 1,
         "step: state has 1 values, need 3": 1,
     }
     assert res.radar_reports == 1
     assert res.rf_attempts == 0
     assert math.isnan(res.radar_rcs_dbsm[0])
+    assert res.radar_horizontal == 1 and res.samples["radar_validated"].t.size == 0
 
 
 def _canonical(res: Evaluation) -> str:

@@ -94,7 +94,7 @@ def _imm(**changes: Any) -> dict[str, Any]:
             r"measurement\.radar\.low_el_deg must be > 0",
         ),
         (
-            lambda d: d["gating"].update(far_gate_m=1200.0),
+            lambda d: d["gating"].update(range_gate_m=1500.0, far_gate_m=1200.0),
             r"gating\.far_gate_m \(1200\) must exceed gating\.range_gate_m \(1500\)",
         ),
         (lambda d: d["gating"].update(far_gate_m=-1.0), r"gating\.far_gate_m must be > 0"),
@@ -370,15 +370,15 @@ def test_far_gate_keeps_the_track_beyond_the_range_gate_with_horizontal_updates(
 ) -> None:
     sc = OutboundScene(site, seed=11)
     sc.build_far(300.0)
-    base = load_profile("tracker")
-    assert base.range_gate_m == 1500.0 and base.far_gate_m is None
+    base = load_profile("tracker").with_changes(range_gate_m=1500.0, far_gate_m=None)
     far = base.with_changes(far_gate_m=2500.0)
     far_s = [(t, p) for t, p in sc.truth.items() if sc.far(p)]
     t0, t1 = far_s[0][0], far_s[-1][0]  # about 100 s beyond the range gate
     assert t1 - t0 > 90.0
 
     # without a far gate the reports out there are discarded and the track times out
-    tr, steps = _run(sc, site)
+    tr = Tracker(base, site)
+    steps = run_tracker(tr, sc.stream())
     out = [s for s in steps if s.source == "radar" and t0 + 1 <= s.t <= t1 - 1]
     assert out and all(s.reason == "range_gate" for s in out)
     assert tr.counters.get("reinit_max_coast", 0) == 1
@@ -406,7 +406,7 @@ def test_reports_beyond_the_range_gate_never_start_a_track(site: Site) -> None:
     start = min(t for t, p in sc.truth.items() if sc.far(p)) + 5.0
     sc.frames = [f for f in sc.frames if f.t >= start]  # the radar sees it only out there
     sc.fixes = []
-    far = load_profile("tracker").with_changes(far_gate_m=2500.0)
+    far = load_profile("tracker").with_changes(range_gate_m=1500.0, far_gate_m=2500.0)
     steps = run_tracker(Tracker(far, site), sc.stream())
     out = [s for s in steps if sc.far(sc.truth[round(s.t * 4) / 4])]
     assert out and not any(s.counted for s in out)

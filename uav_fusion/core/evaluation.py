@@ -157,6 +157,7 @@ class Evaluation:
     tolerance_s: float
     truth_epochs_in_window: int
     max_truth_gap_s: float
+    radar_horizontal: int = 0  # accepted radar measurements without height (not in the rows)
 
     def row(self, key: str) -> TableRow:
         for r in self.rows:
@@ -177,6 +178,7 @@ class Evaluation:
             "steps": self.steps,
             "step_status": dict(sorted(self.step_status.items())),
             "dropped": dict(sorted(self.dropped.items())),
+            "radar_validated_horizontal": self.radar_horizontal,
             "window_utc_s": [_json_number(self.window[0]), _json_number(self.window[1])],
             "time_coverage_tolerance_s": self.tolerance_s,
             "truth_epochs_in_window": self.truth_epochs_in_window,
@@ -248,6 +250,7 @@ class Evaluator:
         self.window = window
         self.dropped: Counter[str] = Counter()
         self.step_status: Counter[str] = Counter()
+        self.radar_horizontal = 0  # accepted horizontal-only radar measurements (far gate)
         self._truth = _Points()
         self._radar = _Points()  # extra = (rcs_dbsm, 0)
         self._rf = _Points()
@@ -302,11 +305,18 @@ class Evaluator:
         return True
 
     def add_validated(self, t: float, source: str, z: Values) -> bool:
-        """A measurement the filter accepted (``z``: 3 values for radar, 2 for RF)."""
+        """A measurement the filter accepted (``z``: 3 values for radar, 2 for RF). A radar
+        measurement with 2 values (horizontal only, beyond the tracker's 3D range gate) is
+        counted in :attr:`radar_horizontal`; the 3D radar rows leave it out."""
         t = float(t)
         if source not in self._valid:
             return self._drop(f"validated: unknown source {source!r}")
         zz = [float(v) for v in z]
+        if source == "radar" and len(zz) == 2:
+            if not _finite(t, *zz):
+                return self._drop("validated radar: non-finite horizontal position")
+            self.radar_horizontal += 1
+            return True
         need = 3 if source == "radar" else 2
         if len(zz) < need:
             return self._drop(f"validated {source}: {len(zz)} values, need {need}")
@@ -446,6 +456,7 @@ class Evaluator:
             tolerance_s=self.tolerance_s,
             truth_epochs_in_window=int(epochs.size),
             max_truth_gap_s=self.max_truth_gap_s,
+            radar_horizontal=self.radar_horizontal,
         )
 
 

@@ -633,6 +633,8 @@ class FusionNode(Node):
         validated = step.validated
         z = np.asarray(step.z, dtype=float)
         if source == RADAR:
+            if z.size == 2:  # horizontal only (beyond the 3D range gate): drawn at the track's
+                z = np.append(z, step.values[2])  # height
             self.report_layer.radar(z, validated)
         else:
             self.report_layer.rf_fix(z, updated)
@@ -648,7 +650,8 @@ class FusionNode(Node):
         side = self.pub_updated if updated else self.pub_coasted
         if side.get_subscription_count():
             side.publish(cv.odometry_from_values(step.t, v, self.frame, self.child_frame))
-        if validated:
+        if validated and (source != RADAR or step.dim == 3):
+            # (a horizontal-only radar update has no height: not on fusion/accepted/radar)
             self.accepted_published += 1
             if source == RADAR:
                 if self.pub_acc_radar.get_subscription_count():

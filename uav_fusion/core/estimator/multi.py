@@ -7,9 +7,12 @@ confirmation, and the radar object table with its UAV score
 
 Per radar frame (one time for all reports):
 
-1. every finite report updates its radar object; reports beyond the range gate, coasted
-   reports (with ``association.skip_radar_coasts``) and reports of objects scoring below
-   ``follow_min`` are not candidates;
+1. every finite report updates its radar object; reports beyond the range gate (or, with
+   ``far_gate_m``, beyond the far gate), coasted reports (with
+   ``association.skip_radar_coasts``) and reports of objects scoring below ``follow_min``
+   are not candidates; a candidate between the range gate and the far gate, or below the
+   ground (``flat_below_ground``), is horizontal only: it may update a track (its climb rate
+   held near zero first), never start one;
 2. every track is predicted to the frame's time (the deleter drops a track whose last
    accepted measurement is older than ``max_coast_s``);
 3. tracks and candidates are assigned one to one (global nearest neighbour: Hungarian
@@ -192,6 +195,8 @@ class MultiTracker:
         self._g3 = nis_gate(profile.nis_probability, 3)
         gate = profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
         self._gate2 = float(gate) ** 2
+        far = profile.far_gate_m
+        self._far2 = float(far) ** 2 if far is not None and far > gate else 0.0  # 0: none
         self._radar_pos = tuple(float(v) for v in site.radar.enu)
         self.tracks: list[UavTrack] = []
         self._next_id = 1
@@ -298,6 +303,7 @@ class MultiTracker:
         r_at = self._r_obj.r_at
         update_object = self.objects.update
         gate2 = self._gate2
+        far2 = self._far2
         skip_coasts = cfg.skip_radar_coasts
         isfinite = math.isfinite
         for trk in frame.tracks:
@@ -308,11 +314,14 @@ class MultiTracker:
             obj = update_object(trk, ro)
             r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
             d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
-            if d2 > gate2 or (skip_coasts and obj.coasting):
+            if (d2 > gate2 and not d2 <= far2) or (skip_coasts and obj.coasting):
                 continue
             s = obj.score(cfg)
             z: tuple[float, ...] = (trk.e, trk.n, trk.u)
-            if flat and trk.u < -cfg.below_ground_m:
+            if d2 > gate2:
+                # inside the far gate: horizontal only (updates, never a birth)
+                z, r = (trk.e, trk.n), (r[0], r[1], r[3])
+            elif flat and trk.u < -cfg.below_ground_m:
                 # the elevation of a low target is the radar's weak point (ground multipath):
                 # range and azimuth still place it; its object without the below-ground term
                 if obj.below_ground(cfg):
