@@ -79,12 +79,12 @@ def test_detections_carry_our_r_and_the_same_drops(
     b = mb.build_baseline(profile, site)
     r0 = np.array(site.radar.enu, dtype=float)
     p = r0 + np.array([300.0, 400.0, 80.0])
-    far = r0 + np.array([2000.0, 0.0, 50.0])
+    far = r0 + np.array([3000.0, 0.0, 50.0])  # beyond the profile's far gate (2500 m)
     mk = lambda tid, q, v: RadarTrack(  # noqa: E731
         10.0, tid, 0.0, 0.0, 0.0, *map(float, q), v, 0.8, None, -10.0
     )
     dets = b.radar_detections(RadarFrame(10.0, (mk(1, p, (1.0, 2.0, 0.0)), mk(2, far, None))))
-    (d,) = dets  # beyond the range gate: dropped
+    (d,) = dets  # beyond the gate: dropped
     np.testing.assert_array_equal(np.asarray(d.state_vector).ravel(), p)
     expected = packed_to_array(radar_model_from_profile(profile, site).r_at(*p))
     np.testing.assert_allclose(np.asarray(d.measurement_model.covar()), expected, rtol=0, atol=0)
@@ -94,6 +94,13 @@ def test_detections_carry_our_r_and_the_same_drops(
     assert profile.score.skip_radar_coasts
     assert not b.radar_detections(RadarFrame(10.5, (mk(1, p, (1.0, 2.0, 0.0)),)))
     assert b.dropped == {"range_gate": 1, "coast": 1}
+    # the baseline has no horizontal-only updates: 3D detections out to the far gate (2000 m
+    # kept), or out to the gate it is given
+    assert profile.range_gate_m == 1000.0 and profile.far_gate_m == 2500.0
+    mid = r0 + np.array([2000.0, 0.0, 50.0])
+    assert len(b.radar_detections(RadarFrame(11.0, (mk(3, mid, (1.0, 0.0, 0.0)),)))) == 1
+    b2 = mb.build_baseline(profile, site, range_gate_m=1500.0)
+    assert not b2.radar_detections(RadarFrame(11.0, (mk(3, mid, (1.0, 0.0, 0.0)),)))
     # RF: R from the CEP model; a CEP above max_cep_m dropped
     att = RfAttempt(11.0, 1, True, 0.0, 0.0, 5.0, 6.0, 9.0, 4, 4)
     rd = b.rf_detection(att)
