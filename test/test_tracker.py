@@ -400,17 +400,23 @@ def test_far_gate_keeps_the_track_beyond_the_range_gate_with_horizontal_updates(
     assert before == [(s.status, s._state) for s in steps2 if s.t < first_far]
 
 
-def test_reports_beyond_the_range_gate_never_start_a_track(site: Site) -> None:
+def test_a_track_started_beyond_the_range_gate_takes_the_height_prior(site: Site) -> None:
     sc = OutboundScene(site, seed=12)
     sc.build_far(300.0)
     start = min(t for t, p in sc.truth.items() if sc.far(p)) + 5.0
     sc.frames = [f for f in sc.frames if f.t >= start]  # the radar sees it only out there
     sc.fixes = []
     far = load_profile("tracker").with_changes(range_gate_m=1500.0, far_gate_m=2500.0)
-    steps = run_tracker(Tracker(far, site), sc.stream())
+    tr = Tracker(far, site)
+    steps = run_tracker(tr, sc.stream())
     out = [s for s in steps if sc.far(sc.truth[round(s.t * 4) / 4])]
-    assert out and not any(s.counted for s in out)
-    assert {s.reason for s in out} == {"range_gate"}
+    started = [s for s in out if s.status == "initialised"]
+    assert len(started) == 1 and len(started[0].z) == 3  # the step shows the report it used
+    assert started[0].x[2] == pytest.approx(far.rf_init_altitude_m)  # not the report's height
+    used = [s for s in out if s.status == "updated" and s.source == "radar"]
+    assert len(used) > 100 and all(len(s.z) == 2 for s in used)
+    # the reports' +150 m never got into the height: the prior (40 m) against a 50 m truth
+    assert max(abs(float(s.x[2] - sc.truth[round(s.t * 4) / 4][2])) for s in used) < 20.0
 
 
 def test_fixed_rate_accessors(site: Site) -> None:

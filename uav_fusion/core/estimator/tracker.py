@@ -13,9 +13,10 @@ Per radar frame (all reports share one time):
 2. with a track: the deleter may drop it (``max_coast``); otherwise it is predicted to the
    frame's time once;
 3. reports beyond the range gate are discarded (``range_gate``), except, with
-   ``far_gate_m`` and a confirmed track, those inside the far gate: they stay candidates for
-   the confirmed track (step 4) with their horizontal position only (R's horizontal block;
-   the vertical velocity is held near zero as for RF fixes), never start or confirm a track;
+   ``far_gate_m``, those inside the far gate: they stay candidates with their horizontal
+   position only (R's horizontal block; before such an update the vertical velocity is held
+   near zero as for RF fixes, and a track started from such a report takes the RF start's
+   height prior, ``rf_init_altitude_m`` and ``rf_init_altitude_std_m``, with no climb);
 4. confirmed track: a report is *eligible* when its object's score is at least
    ``follow_min``; of the eligible reports inside the NIS gate the one with the smallest
    ``NIS - 2 score`` (global nearest neighbour with the score as prior log-odds) updates the
@@ -422,7 +423,7 @@ class Tracker:
         gate2 = self._gate2
         cfg = self.cfg
         skip_coasts = cfg.skip_radar_coasts
-        far2 = self._far2 if self.confirmed else 0.0
+        far2 = self._far2
         far = self._far
         far.clear()
         for i, trk, obj, r in objs:
@@ -430,8 +431,8 @@ class Tracker:
             d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
             if d2 > gate2:
                 if d2 <= far2 and not (obj.coasting and skip_coasts):
-                    # inside the far gate: a horizontal-only candidate for the confirmed
-                    # track (R's horizontal block; the elevation is too poor out there)
+                    # inside the far gate: a horizontal-only candidate (R's horizontal
+                    # block; the elevation is too poor out there)
                     far.add(i)
                     rs[i] = (r[0], r[1], r[3])
                     cands.append((i, trk, obj, obj.score(cfg)))
@@ -491,13 +492,16 @@ class Tracker:
                 if strong:
                     best = min(strong, key=lambda e: (e[6] - 2.0 * e[3], e[0]))
                     i, trk, obj, s, z, r, nis, _ = best
+                    if len(z) == 2:
+                        self._hold_vz(t, f)
                     f.update(z, r)
                     self.confirmed = True
                     self._pending_reset = None
                     self._count("confirmed")
                     res.append((i, self._used(t, RADAR, nis, z, trk.track_id, s, 1.0)))
                     self.followed = trk.track_id
-                    self.last_3d_t = t
+                    if len(z) == 3:
+                        self.last_3d_t = t
                     for e in scored:
                         if e is not best:
                             res.append((e[0], self._discard_report(t, e, "not_selected")))
@@ -564,13 +568,10 @@ class Tracker:
         self, t: float, cands: list[tuple[int, RadarTrack, RadarObject, float]]
     ) -> list[tuple[int, TrackerStep]]:
         cfg = self.cfg
-        far = self._far
         ok = [
             e
             for e in cands
-            if e[3] >= cfg.init_min
-            and e[2].n_reports >= cfg.init_min_reports
-            and not (far and e[0] in far)
+            if e[3] >= cfg.init_min and e[2].n_reports >= cfg.init_min_reports
         ]
         res: list[tuple[int, TrackerStep]] = []
         best = max(ok, key=lambda e: (e[3], -e[0])) if ok else None
@@ -584,10 +585,18 @@ class Tracker:
             assert kf is not None
             x = list(kf.x)
             P = expand_upper(kf.P)
+            far = self._far
+            flat = bool(far) and i in far
+            if flat:  # no usable height out there: the RF start's height prior, no climb
+                p = self.profile
+                x[2], x[5] = p.rf_init_altitude_m, 0.0
+                P[2, :] = P[:, 2] = P[5, :] = P[:, 5] = 0.0
+                P[2, 2] = p.rf_init_altitude_std_m**2
+                P[5, 5] = p.vz_hold_sigma_mps**2
             self._start(t, x, P, tentative=False)
             self.last_update_t = t
             self.followed = trk.track_id
-            self.last_3d_t = t
+            self.last_3d_t = None if flat else t
             status, reason = self._confirmed_status()
             self._count(f"{status}_{RADAR}")
             z = (trk.e, trk.n, trk.u)
