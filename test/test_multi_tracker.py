@@ -471,46 +471,55 @@ def test_an_emitter_whose_fixes_keep_missing_its_track_moves_to_the_right_one(
     assert on_a.emitter == emitter_key(FREQ_A) and on_b.emitter is None
 
 
-def test_beyond_the_range_gate_a_track_is_updated_horizontally_and_nothing_is_born(
-    site: Site,
-) -> None:
-    """A silent UAV flies out from 700 m to 1600 m (range gate 1000 m, far gate 2500 m), its
-    reports 60 m too high out there; a second silent UAV appears only beyond 1000 m."""
+def test_beyond_the_range_gate_tracks_are_updated_and_born_horizontally(site: Site) -> None:
+    """A silent UAV flies out from 700 m to 1600 m (range gate 1000 m, far gate 2500 m); a
+    second one is seen only beyond 1000 m. Out there every report is 60 m too high: the
+    heights come from the last 3D updates and from the height prior, not from the reports."""
     prof = load_profile("tracker")
     assert prof.range_gate_m == 1000.0 and prof.far_gate_m == 2500.0
     start = np.array([0.0, 700.0, 0.0])
     path = _flight(start, 0.0, np.array([0.0, 10.0, 0.0]))
-    lifted = Uav(path, 41)
-    far_only = Uav(lambda tau: np.array([300.0, 1500.0 - 3.0 * tau, 60.0]), 42)
+    far_path = lambda tau: np.array([300.0, 1500.0 - 3.0 * tau, 60.0])  # noqa: E731
+    r0 = np.array(site.radar.enu, dtype=float)
 
     def high(tau: float) -> bool:
         return float(np.hypot(*path(tau)[:2])) > 1000.0
 
     def lift(item: RadarFrame | RfAttempt) -> RadarFrame | RfAttempt:
         """60 m of elevation error beyond 1000 m."""
-        if not isinstance(item, RadarFrame) or not high(item.t - 1000.0):
+        if not isinstance(item, RadarFrame):
             return item
         return RadarFrame(
             item.t,
             tuple(
-                dataclasses.replace(trk, u=trk.u + 60.0) if trk.track_id == 41 else trk
+                dataclasses.replace(trk, u=trk.u + 60.0)
+                if math.hypot(trk.e - r0[0], trk.n - r0[1]) > 1000.0
+                else trk
                 for trk in item.tracks
             ),
         )
 
-    stream = [lift(x) for x in scene_stream(site, [lifted, far_only], 110.0, 4)]
-    r0 = np.array(site.radar.enu, dtype=float)
+    stream = [lift(x) for x in scene_stream(site, [Uav(path, 41), Uav(far_path, 42)], 110.0, 4)]
     epochs = run_multi(MultiTracker(prof, site), stream, 1.0, 1000.0, 1109.0)
     out = [ep for ep in epochs if high(ep.t - 1000.0)]
     assert len(out) > 60  # about 70 s beyond the range gate
+    ids = set()
     for ep in out:
         mine = _near(site, ep, path, 40.0)
-        assert len(mine) == 1 and len(ep.tracks) == 1  # never a track on the far-only UAV
+        assert len(mine) == 1
+        ids.add(mine[0].track_id)
         p = r0 + path(ep.t - 1000.0)
         assert abs(mine[0].x[2] - p[2]) < 20.0  # the 60 m error never got into the height
-    assert len({ep.tracks[0].track_id for ep in out}) == 1
-    # without the far gate the track is gone soon after the UAV passes the range gate
+    assert len(ids) == 1
+    # the UAV seen only out there gets a track after the birth age, at the prior's height
+    late = [ep for ep in epochs if ep.t - 1000.0 > 20.0]
+    for ep in late:
+        theirs = _near(site, ep, far_path, 40.0)
+        assert len(theirs) == 1 and len(ep.tracks) == 2
+        h = r0[2] + far_path(ep.t - 1000.0)[2]
+        assert abs(theirs[0].x[2] - h) < 30.0  # prior 40 m for 60 m; the reports said 120 m
+    # without the far gate: no track out there soon after the first UAV passes the gate
     near = run_multi(
         MultiTracker(prof.with_changes(far_gate_m=None), site), stream, 1.0, 1000.0, 1109.0
     )
-    assert sum(1 for ep in near if high(ep.t - 1000.0) and ep.tracks) < 10
+    assert sum(1 for ep in near if ep.tracks and high(ep.t - 1000.0)) < 10

@@ -12,7 +12,9 @@ Per radar frame (one time for all reports):
    ``association.skip_radar_coasts``) and reports of objects scoring below ``follow_min``
    are not candidates; a candidate between the range gate and the far gate, or below the
    ground (``flat_below_ground``), is horizontal only: it may update a track (its climb rate
-   held near zero first), never start one;
+   held near zero first); one below the ground never starts a track, one beyond the range
+   gate may (step 4), with the RF start's height prior (``rf_init_altitude_m``,
+   ``rf_init_altitude_std_m``) and no climb;
 2. every track is predicted to the frame's time (the deleter drops a track whose last
    accepted measurement is older than ``max_coast_s``);
 3. tracks and candidates are assigned one to one (global nearest neighbour: Hungarian
@@ -319,7 +321,7 @@ class MultiTracker:
             s = obj.score(cfg)
             z: tuple[float, ...] = (trk.e, trk.n, trk.u)
             if d2 > gate2:
-                # inside the far gate: horizontal only (updates, never a birth)
+                # inside the far gate: horizontal only
                 z, r = (trk.e, trk.n), (r[0], r[1], r[3])
             elif flat and trk.u < -cfg.below_ground_m:
                 # the elevation of a low target is the radar's weak point (ground multipath):
@@ -405,8 +407,11 @@ class MultiTracker:
         for b, (trk, obj, s, _r, z) in enumerate(cands):
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
                 continue
+            far = False
             if len(z) != 3:
-                continue
+                far = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2 > gate2
+                if not far:  # below the ground: no birth
+                    continue
             if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
                 continue
             if any(
@@ -416,7 +421,15 @@ class MultiTracker:
                 continue
             kf = obj.kf
             assert kf is not None
-            tr = self._new_track(t, list(kf.x), expand_upper(kf.P), confirmed=True)
+            x0 = list(kf.x)
+            P0 = expand_upper(kf.P)
+            if far:  # no usable height out there: the RF start's height prior, no climb
+                p = self.profile
+                x0[2], x0[5] = p.rf_init_altitude_m, 0.0
+                P0[2, :] = P0[:, 2] = P0[5, :] = P0[:, 5] = 0.0
+                P0[2, 2] = p.rf_init_altitude_std_m**2
+                P0[5, 5] = p.vz_hold_sigma_mps**2
+            tr = self._new_track(t, x0, P0, confirmed=True)
             tr.followed = trk.track_id
             tr.last_radar_t = t
             tr.score = s
