@@ -143,6 +143,11 @@ def test_live_tracker_equals_the_offline_run_and_its_grid(
     dp = np.array([o.P[:3, :3] for o in odom]) - np.array([g.P[:3, :3] for g in expected_grid])
     assert np.max(np.abs(dp)) < 1e-6
     assert not h.fusion.dropped
+    # horizontal-only radar updates (beyond the 3D range gate) are counted on /diagnostics
+    n_flat = sum(1 for s in steps if s.status == "updated" and s.source == "radar" and s.dim == 2)
+    diag = h.fusion.diagnostics()
+    assert n_flat > 100 and int(diag["estimator_updated_radar_horizontal"]) == n_flat
+    assert float(diag["since_last_3d_radar_s"]) >= 0.0
     h.destroy()
 
 

@@ -909,6 +909,9 @@ class FusionNode(Node):
         out["track"] = "confirmed"
         if best.last_update_t is not None and math.isfinite(ref):
             out["since_last_accepted_s"] = f"{ref - best.last_update_t:.3f}"
+        last_3d = tr.last_3d_t  # when the height was last measured (radar in 3D)
+        if self.multi is None and math.isfinite(ref):
+            out["since_last_3d_radar_s"] = "-" if last_3d is None else f"{ref - last_3d:.3f}"
         obj = tr.objects.objects.get(best.radar_object) if best.radar_object is not None else None
         if obj is not None:
             score = obj.score(tr.cfg)

@@ -494,6 +494,7 @@ class Tracker:
                     i, trk, obj, s, z, r, nis, _ = best
                     if len(z) == 2:
                         self._hold_vz(t, f)
+                        self._count("updated_radar_horizontal")
                     f.update(z, r)
                     self.confirmed = True
                     self._pending_reset = None
@@ -515,6 +516,7 @@ class Tracker:
                 w = self.robust.weight(nis, len(z))
                 if len(z) == 2:
                     self._hold_vz(t, f)
+                    self._count("updated_radar_horizontal")
                 f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
                 res.append((i, self._used(t, RADAR, nis, z, trk.track_id, s, w)))
                 self.followed = trk.track_id
