@@ -75,6 +75,7 @@ from uav_fusion.core.estimator.profile import Profile
 from uav_fusion.core.estimator.track import nis_gate
 from uav_fusion.core.estimator.tracker import (
     motion_filter_from_profile,
+    object_start,
     radar_model_from_profile,
     rf_model_from_profile,
     robust_from_profile,
@@ -419,16 +420,7 @@ class MultiTracker:
                 for a in range(len(live))
             ):
                 continue
-            kf = obj.kf
-            assert kf is not None
-            x0 = list(kf.x)
-            P0 = expand_upper(kf.P)
-            if far:  # no usable height out there: the RF start's height prior, no climb
-                p = self.profile
-                x0[2], x0[5] = p.rf_init_altitude_m, 0.0
-                P0[2, :] = P0[:, 2] = P0[5, :] = P0[:, 5] = 0.0
-                P0[2, 2] = p.rf_init_altitude_std_m**2
-                P0[5, 5] = p.vz_hold_sigma_mps**2
+            x0, P0 = object_start(obj, self.profile, far)
             tr = self._new_track(t, x0, P0, confirmed=True)
             tr.followed = trk.track_id
             tr.last_radar_t = t

@@ -207,6 +207,22 @@ def motion_filter_from_profile(profile: Profile) -> MotionFilter:
     return CvFilter(profile.q)
 
 
+def object_start(obj: RadarObject, profile: Profile, flat: bool) -> tuple[list[float], FloatArray]:
+    """A new track's state and covariance from a radar object's own filter; ``flat`` (the
+    object reported beyond the 3D range gate): no usable height, so the RF start's height
+    prior (``rf_init_altitude_m`` +- ``rf_init_altitude_std_m``) and no climb instead."""
+    kf = obj.kf
+    assert kf is not None
+    x = list(kf.x)
+    P = expand_upper(kf.P)
+    if flat:
+        x[2], x[5] = profile.rf_init_altitude_m, 0.0
+        P[2, :] = P[:, 2] = P[5, :] = P[:, 5] = 0.0
+        P[2, 2] = profile.rf_init_altitude_std_m**2
+        P[5, 5] = profile.vz_hold_sigma_mps**2
+    return x, P
+
+
 class Tracker:
     """Radar + RF UAV tracker over all radar objects (see the module text)."""
 
@@ -583,18 +599,8 @@ class Tracker:
                 self._count("reinit_superseded")
                 self.filter = None
                 self._pending_reset = "superseded"
-            kf = obj.kf
-            assert kf is not None
-            x = list(kf.x)
-            P = expand_upper(kf.P)
-            far = self._far
-            flat = bool(far) and i in far
-            if flat:  # no usable height out there: the RF start's height prior, no climb
-                p = self.profile
-                x[2], x[5] = p.rf_init_altitude_m, 0.0
-                P[2, :] = P[:, 2] = P[5, :] = P[:, 5] = 0.0
-                P[2, 2] = p.rf_init_altitude_std_m**2
-                P[5, 5] = p.vz_hold_sigma_mps**2
+            flat = i in self._far
+            x, P = object_start(obj, self.profile, flat)
             self._start(t, x, P, tentative=False)
             self.last_update_t = t
             self.followed = trk.track_id
