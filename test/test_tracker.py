@@ -338,6 +338,58 @@ def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
     assert later and max(sc.error(s) for s in later) < 40.0
 
 
+def _swap_scene(site: Site, swap_t: float = 120.0, duration_s: float = 200.0) -> Scene:
+    """The radar's track on the UAV (id 10) swaps at ``swap_t`` onto another object that flies
+    off at 12 m/s while its class probability decays; the UAV gets a new track id (11) a
+    second later whose class probability climbs from the new-track prior; RF fixes go on."""
+    sc = Scene(site, seed=11)
+    p_swap = sc.uav(swap_t)
+    away = (p_swap - sc.r0) * np.array([1.0, 1.0, 0.0])
+    away /= np.linalg.norm(away)
+    for k in range(int(duration_s * 4)):
+        t = k * 0.25
+        p = sc.uav(t)
+        sc.truth[t] = p
+        vel = (sc.uav(t + 0.01) - p) / 0.01
+        tracks = []
+        if t < swap_t:
+            tracks.append(sc.report(t, 10, p, 0.85, vel))
+        else:
+            q = p_swap + 12.0 * (t - swap_t) * away
+            prob = max(0.25, 0.85 - 0.06 * (t - swap_t))
+            tracks.append(sc.report(t, 10, q, prob, 12.0 * away))
+            if t >= swap_t + 1.0:
+                prob = min(0.85, 0.3 + 0.07 * (t - swap_t - 1.0))
+                tracks.append(sc.report(t, 11, p, prob, vel))
+        sc.frames.append(RadarFrame(t, tuple(tracks)))
+        if k % 16 == 8:
+            e, nn = p[:2] + sc.rng.normal(0.0, 8.0, 2)
+            sc.fixes.append(RfAttempt(t + 0.05, k, True, 0.0, 0.0, e, nn, 9.0, 4, 4))
+    return sc
+
+
+def test_a_radar_track_that_swaps_off_the_uav_is_left_for_the_uavs_new_track(
+    site: Site,
+) -> None:
+    swap_t = 120.0
+    sc = _swap_scene(site, swap_t)
+    tracker, steps = _run(sc, site)
+    assert tracker.counters.get("reinit_challenged", 0) == 1
+    # the old id stays the UAV's while it is; the new id takes over within seconds
+    after = [s for s in steps if s.updated and s.source == "radar" and s.t >= swap_t]
+    first_new = min(s.t for s in after if s.track_id == 11)
+    assert first_new < swap_t + 20.0
+    assert not any(s.track_id == 10 for s in after if s.t >= first_new)
+    late = [s for s in steps if s.counted and s.t > first_new + 2.0]
+    assert late and max(sc.error(s) for s in late) < 40.0
+    # without the rule the track rides the swapped radar track away from the UAV
+    prof = load_profile("tracker")
+    off = dataclasses.replace(prof, score=dataclasses.replace(prof.score, challenge_s=0.0))
+    steps0 = run_tracker(Tracker(off, site), sc.stream())
+    at = [s for s in steps0 if s.counted and swap_t + 20.0 <= s.t < swap_t + 21.0]
+    assert at and min(sc.error(s) for s in at) > 100.0
+
+
 class OutboundScene(Scene):
     """The UAV flies out from 600 m to 2100 m from the radar (15 m/s) and back, at 50 m height;
     beyond 1500 m its reports carry a +150 m elevation error (low-elevation multipath) and RF

@@ -82,6 +82,8 @@ class ScoreConfig:
     init_min_reports: int = 4
     skip_radar_coasts: bool = False
     rf_nearest_only: bool = False
+    challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
+    challenge_margin: float = 0.5
 
 
 

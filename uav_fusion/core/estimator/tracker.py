@@ -22,7 +22,14 @@ Per radar frame (all reports share one time):
    ``NIS - 2 score`` (global nearest neighbour with the score as prior log-odds) updates the
    track with ``R / w`` (``w`` the robust weight); the others are ``not_selected``. When no
    eligible report is inside the gate, the most UAV-like eligible report makes the frame's
-   ``coasted`` step (a rejection); ineligible reports are discarded (``score``);
+   ``coasted`` step (a rejection); ineligible reports are discarded (``score``). With
+   ``challenge_s`` > 0, before that: when, for ``challenge_s`` seconds, one and the same
+   object outside the gate has reached ``init_min`` (with ``init_min_reports`` reports) and
+   outscored the followed object by ``challenge_margin``, the radar's track the UAV track
+   follows has most likely left the UAV (the radar's own tracker swapped it onto another
+   object, while the UAV's evidence, its class and RF support, went to a new track id): the
+   track is dropped (``reinit_challenged``) and started again from the reports of the frame
+   (step 5);
 5. no confirmed track: the object with the highest score that reaches ``init_min`` with at
    least ``init_min_reports`` reports starts a confirmed track from its own filter's state
    (position and velocity); a tentative RF track is confirmed by an eligible report inside
@@ -45,6 +52,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -88,6 +96,9 @@ _pack = struct.Struct("27d").pack
 _NAN_STATE = _pack(*(math.nan,) * 27)
 # a filter's (x, P) lists with their packed bytes, mode probabilities and effective q
 _Packed = tuple[object, object, bytes, tuple[float, ...], tuple[float, float, float]]
+# a candidate report of a frame: (index in the frame, report, its object, the object's score,
+# z, R, NIS against the track, inside the gate)
+_Scored = tuple[int, RadarTrack, RadarObject, float, tuple[float, ...], PackedR, float, bool]
 
 
 class TrackerStep(Step):
@@ -259,6 +270,9 @@ class Tracker:
         self.followed: int | None = None  # radar object id of the last radar update
         self.last_3d_t: float | None = None  # time of the last radar update
         self.consecutive_rejections = 0
+        # (object id, since when) of a strong object outside the gate that outscores the
+        # followed one (association.challenge_s)
+        self._challenger: tuple[int, float] | None = None
         self.segment = -1
         self._mofn: MofN | None = None
         self._last_hit = (0.0, 0.0, 0.0)
@@ -364,6 +378,7 @@ class Tracker:
         self._mofn = None
         self.consecutive_rejections = 0
         self.followed = None
+        self._challenger = None
 
     def _advance(self, t: float) -> bool:
         """Deleter check and prediction to ``t``; False when ``t`` is before the track."""
@@ -524,6 +539,11 @@ class Tracker:
                             res.append((e[0], self._discard_report(t, e, "not_selected")))
                     return res
                 return self._initiate(t, cands)
+            if cfg.challenge_s > 0 and self._challenged(t, scored):
+                # the followed object has been outscored by a strong object outside the
+                # gate for challenge_s: the radar's track has most likely left the UAV
+                self._drop("challenged")
+                return self._initiate(t, cands)
             eligible = [e for e in scored if e[3] >= cfg.follow_min]
             in_gate = [e for e in eligible if e[7]]
             if in_gate:
@@ -573,6 +593,35 @@ class Tracker:
             return res
         # no confirmed track (none, or a tentative RF track): a strong object starts one
         return self._initiate(t, cands)
+
+    def _challenged(
+        self,
+        t: float,
+        scored: Sequence[_Scored],
+    ) -> bool:
+        """Whether a strong object outside the gate (score >= ``init_min`` and at least
+        ``challenge_margin`` above the followed object's) has done so for ``challenge_s``."""
+        cfg = self.cfg
+        fol = self.objects.objects.get(self.followed) if self.followed is not None else None
+        if fol is None:
+            self._challenger = None
+            return False
+        bar = max(cfg.init_min, fol.score(cfg) + cfg.challenge_margin)
+        best = None
+        for e in scored:
+            if e[7] or e[2] is fol or e[3] < bar or e[2].n_reports < cfg.init_min_reports:
+                continue
+            if best is None or e[3] > best[3]:
+                best = e
+        if best is None:
+            self._challenger = None
+            return False
+        tid = best[2].id
+        ch = self._challenger
+        if ch is None or ch[0] != tid:
+            self._challenger = (tid, t)
+            return False
+        return t - ch[1] >= cfg.challenge_s
 
     def _discard_report(
         self,
