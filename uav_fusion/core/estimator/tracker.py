@@ -594,26 +594,20 @@ class Tracker:
         # no confirmed track (none, or a tentative RF track): a strong object starts one
         return self._initiate(t, cands)
 
-    def _challenged(
-        self,
-        t: float,
-        scored: Sequence[_Scored],
-    ) -> bool:
+    def _challenged(self, t: float, scored: Sequence[_Scored]) -> bool:
         """Whether a strong object outside the gate (score >= ``init_min`` and at least
         ``challenge_margin`` above the followed object's) has done so for ``challenge_s``."""
         cfg = self.cfg
-        fol = self.objects.objects.get(self.followed) if self.followed is not None else None
-        if fol is None:
-            self._challenger = None
-            return False
-        bar = max(cfg.init_min, fol.score(cfg) + cfg.challenge_margin)
+        lo = cfg.init_min
+        n_min = cfg.init_min_reports
         best = None
-        for e in scored:
-            if e[7] or e[2] is fol or e[3] < bar or e[2].n_reports < cfg.init_min_reports:
+        for e in scored:  # the strongest object outside the gate (most frames: none)
+            if e[7] or e[3] < lo or e[2].n_reports < n_min or e[1].track_id == self.followed:
                 continue
             if best is None or e[3] > best[3]:
                 best = e
-        if best is None:
+        fol = self.objects.objects.get(self.followed) if self.followed is not None else None
+        if best is None or fol is None or best[3] < fol.score(cfg) + cfg.challenge_margin:
             self._challenger = None
             return False
         tid = best[2].id
