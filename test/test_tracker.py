@@ -390,6 +390,23 @@ def test_a_radar_track_that_swaps_off_the_uav_is_left_for_the_uavs_new_track(
     assert at and min(sc.error(s) for s in at) > 100.0
 
 
+@pytest.mark.parametrize(
+    ("key", "value"), [("challenge_margin", 20.0), ("challenge_s", 1000.0)]
+)
+def test_a_challenger_must_outscore_the_followed_object_by_the_margin_for_the_time(
+    site: Site, key: str, value: float
+) -> None:
+    # the same swap: a margin no object reaches, or a time longer than the flight, and the
+    # track never leaves the swapped radar track
+    sc = _swap_scene(site)
+    prof = load_profile("tracker")
+    strict = dataclasses.replace(prof, score=dataclasses.replace(prof.score, **{key: value}))
+    tracker = Tracker(strict, site)
+    steps = run_tracker(tracker, sc.stream())
+    assert tracker.counters.get("reinit_challenged", 0) == 0
+    assert not any(s.updated and s.track_id == 11 for s in steps)
+
+
 class OutboundScene(Scene):
     """The UAV flies out from 600 m to 2100 m from the radar (15 m/s) and back, at 50 m height;
     beyond 1500 m its reports carry a +150 m elevation error (low-elevation multipath) and RF
