@@ -118,7 +118,7 @@ class MultiSettings:
     tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
     merge_keeps_live: bool = True  # a merge keeps the recently updated track over the older
     flat_below_ground: bool = True  # a report below the ground updates east / north only
-    birth_sep_m: float | None = 25.0  # a strong object inside a track's gate starts a track
+    birth_sep_m: float | None = 60.0  # a strong object inside a track's gate starts a track
     # when that track took another report of the frame this far away (None: never)
 
 
