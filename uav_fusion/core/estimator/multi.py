@@ -76,6 +76,7 @@ from uav_fusion.core.estimator.track import nis_gate
 from uav_fusion.core.estimator.tracker import (
     motion_filter_from_profile,
     object_start,
+    radar_gates2,
     radar_model_from_profile,
     rf_model_from_profile,
     robust_from_profile,
@@ -196,10 +197,7 @@ class MultiTracker:
         self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
         self._g2 = nis_gate(profile.nis_probability, 2)
         self._g3 = nis_gate(profile.nis_probability, 3)
-        gate = profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
-        self._gate2 = float(gate) ** 2
-        far = profile.far_gate_m
-        self._far2 = float(far) ** 2 if far is not None and far > gate else 0.0  # 0: none
+        self._gate2, self._far2 = radar_gates2(profile, site)  # far: 0 without a far gate
         self._radar_pos = tuple(float(v) for v in site.radar.enu)
         self.tracks: list[UavTrack] = []
         self._next_id = 1
@@ -300,6 +298,7 @@ class MultiTracker:
         dv = self._extra_var
         rx, ry, rz = self._radar_pos
         cands: list[_Cand] = []
+        far_cands: set[int] = set()  # candidates beyond the range gate (horizontal only)
         flat = self.settings.flat_below_ground
         if frame.tracks:
             self._count("radar_reports", len(frame.tracks))
@@ -331,6 +330,8 @@ class MultiTracker:
                     s += cfg.below_ground_weight
                 z, r = (trk.e, trk.n), (r[0], r[1], r[3])
             if s >= cfg.follow_min:
+                if d2 > gate2:
+                    far_cands.add(len(cands))
                 cands.append((trk, obj, s, r, z))
         self._advance(t)
         take_tentative = self.settings.tentative_takes_radar
@@ -408,11 +409,9 @@ class MultiTracker:
         for b, (trk, obj, s, _r, z) in enumerate(cands):
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
                 continue
-            far = False
-            if len(z) != 3:
-                far = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2 > gate2
-                if not far:  # below the ground: no birth
-                    continue
+            far = b in far_cands
+            if len(z) != 3 and not far:  # below the ground: no birth
+                continue
             if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
                 continue
             if any(

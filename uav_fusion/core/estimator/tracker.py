@@ -218,6 +218,14 @@ def motion_filter_from_profile(profile: Profile) -> MotionFilter:
     return CvFilter(profile.q)
 
 
+def radar_gates2(profile: Profile, site: Site) -> tuple[float, float]:
+    """The squared 3D range gate (the profile's, else the site's) and the squared far gate
+    (``far_gate_m``; 0 without one, or when it is not beyond the 3D gate)."""
+    gate = profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
+    far = profile.far_gate_m
+    return float(gate) ** 2, (float(far) ** 2 if far is not None and far > gate else 0.0)
+
+
 def object_start(obj: RadarObject, profile: Profile, flat: bool) -> tuple[list[float], FloatArray]:
     """A new track's state and covariance from a radar object's own filter; ``flat`` (the
     object reported beyond the 3D range gate): no usable height, so the RF start's height
@@ -257,11 +265,7 @@ class Tracker:
         self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
         self._g2 = nis_gate(profile.nis_probability, 2)
         self._g3 = nis_gate(profile.nis_probability, 3)
-        gate = profile.range_gate_m if profile.range_gate_m is not None else site.radar.range_gate_m
-        self._gate2 = float(gate) ** 2
-        far = profile.far_gate_m
-        self._far2 = float(far) ** 2 if far is not None and far > gate else 0.0  # 0: none
-        self._far: set[int] = set()  # this frame's reports beyond the range gate, kept 2D
+        self._gate2, self._far2 = radar_gates2(profile, site)  # far: 0 without a far gate
         self._radar_pos = tuple(float(v) for v in site.radar.enu)
         self.filter: MotionFilter | None = None
         self.t: float | None = None
@@ -455,8 +459,7 @@ class Tracker:
         cfg = self.cfg
         skip_coasts = cfg.skip_radar_coasts
         far2 = self._far2
-        far = self._far
-        far.clear()
+        far: set[int] = set()  # reports beyond the range gate, kept as 2D candidates
         for i, trk, obj, r in objs:
             rs[i] = r
             d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
@@ -476,7 +479,7 @@ class Tracker:
             else:
                 cands.append((i, trk, obj, obj.score(cfg)))
         if cands:
-            for i, step in self._radar_candidates(t, cands, rs):
+            for i, step in self._radar_candidates(t, cands, rs, far):
                 out[i] = step
         return [s for s in out if s is not None]
 
@@ -485,18 +488,18 @@ class Tracker:
         t: float,
         cands: list[tuple[int, RadarTrack, RadarObject, float]],
         rs: dict[int, PackedR],
+        far: set[int],
     ) -> list[tuple[int, TrackerStep]]:
         cfg = self.cfg
         res: list[tuple[int, TrackerStep]] = []
         f = self.filter
         if f is not None:
             g = self._g3
-            scored = []
+            scored: list[_Scored] = []
             # the CV filter's kernel directly (what CvFilter.nis calls for a 3D z)
             nis3 = f.kf.nis3 if isinstance(f, CvFilter) else None
             mark = self.objects.mark_fused if self.confirmed else None
             fused_nis = cfg.fused_nis
-            far = self._far
             g2 = self._g2
             for i, trk, obj, s in cands:
                 r = rs[i]
@@ -522,42 +525,26 @@ class Tracker:
                 ]
                 if strong:
                     best = min(strong, key=lambda e: (e[6] - 2.0 * e[3], e[0]))
-                    i, trk, obj, s, z, r, nis, _ = best
-                    if len(z) == 2:
-                        self._hold_vz(t, f)
-                        self._count("updated_radar_horizontal")
-                    f.update(z, r)
                     self.confirmed = True
                     self._pending_reset = None
                     self._count("confirmed")
-                    res.append((i, self._used(t, RADAR, nis, z, trk.track_id, s, 1.0)))
-                    self.followed = trk.track_id
-                    if len(z) == 3:
-                        self.last_3d_t = t
+                    res.append((best[0], self._take_radar(t, f, best, 1.0)))
                     for e in scored:
                         if e is not best:
                             res.append((e[0], self._discard_report(t, e, "not_selected")))
                     return res
-                return self._initiate(t, cands)
+                return self._initiate(t, cands, far)
             if cfg.challenge_s > 0 and self._challenged(t, scored):
                 # the followed object has been outscored by a strong object outside the
                 # gate for challenge_s: the radar's track has most likely left the UAV
                 self._drop("challenged")
-                return self._initiate(t, cands)
+                return self._initiate(t, cands, far)
             eligible = [e for e in scored if e[3] >= cfg.follow_min]
             in_gate = [e for e in eligible if e[7]]
             if in_gate:
                 best = min(in_gate, key=lambda e: (e[6] - 2.0 * e[3], e[0]))
-                i, trk, obj, s, z, r, nis, _ = best
-                w = self.robust.weight(nis, len(z))
-                if len(z) == 2:
-                    self._hold_vz(t, f)
-                    self._count("updated_radar_horizontal")
-                f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
-                res.append((i, self._used(t, RADAR, nis, z, trk.track_id, s, w)))
-                self.followed = trk.track_id
-                if len(z) == 3:
-                    self.last_3d_t = t
+                w = self.robust.weight(best[6], len(best[4]))
+                res.append((best[0], self._take_radar(t, f, best, w)))
                 for e in scored:
                     if e is not best:
                         why = "not_selected" if e[3] >= cfg.follow_min else "score"
@@ -579,7 +566,7 @@ class Tracker:
                     # disagreed included) may start the next one at once
                     self._count("rejected_nis")
                     self._drop("max_rejections")
-                    return self._initiate(t, cands)
+                    return self._initiate(t, cands, far)
                 res.append((i, self._rejected(t, RADAR, nis, z, trk.track_id, s)))
                 for e in scored:
                     if e is best:
@@ -592,7 +579,22 @@ class Tracker:
                 res.append((e[0], self._discard_report(t, e, why)))
             return res
         # no confirmed track (none, or a tentative RF track): a strong object starts one
-        return self._initiate(t, cands)
+        return self._initiate(t, cands, far)
+
+    def _take_radar(self, t: float, f: MotionFilter, e: _Scored, w: float) -> TrackerStep:
+        """Update the track with candidate ``e`` (R / ``w``; a horizontal-only candidate holds
+        the climb rate first) and make its ``updated`` step; the track now follows its
+        object."""
+        _, trk, _, s, z, r, nis, _ = e
+        if len(z) == 2:
+            self._hold_vz(t, f)
+            self._count("updated_radar_horizontal")
+        f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
+        step = self._used(t, RADAR, nis, z, trk.track_id, s, w)
+        self.followed = trk.track_id
+        if len(z) == 3:
+            self.last_3d_t = t
+        return step
 
     def _challenged(self, t: float, scored: Sequence[_Scored]) -> bool:
         """Whether a strong object outside the gate (score >= ``init_min`` and at least
@@ -620,13 +622,16 @@ class Tracker:
     def _discard_report(
         self,
         t: float,
-        e: tuple[int, RadarTrack, RadarObject, float, tuple[float, ...], PackedR, float, bool],
+        e: _Scored,
         why: str,
     ) -> TrackerStep:
         return self._step(t, RADAR, DISCARDED, why, e[6], e[4], e[1].track_id, e[3])
 
     def _initiate(
-        self, t: float, cands: list[tuple[int, RadarTrack, RadarObject, float]]
+        self,
+        t: float,
+        cands: list[tuple[int, RadarTrack, RadarObject, float]],
+        far: set[int],
     ) -> list[tuple[int, TrackerStep]]:
         cfg = self.cfg
         ok = [
@@ -642,7 +647,7 @@ class Tracker:
                 self._count("reinit_superseded")
                 self.filter = None
                 self._pending_reset = "superseded"
-            flat = i in self._far
+            flat = i in far
             x, P = object_start(obj, self.profile, flat)
             self._start(t, x, P, tentative=False)
             self.last_update_t = t
