@@ -77,6 +77,7 @@ def test_the_shipped_definition_has_16_flights_per_half_without_the_default_flig
         ({"splits": {"tune": [3]}}, r"splits.test is missing"),
         ({"splits": {"tune": [3], "test": ["x"]}}, r"splits.test\[0\] must be an integer"),
         ({"scoring": {"grid_hz": 0}}, r"grid_hz must be > 0"),
+        ({"scoring": {"excuse_grounded": "yes"}}, r"excuse_grounded must be true or false"),
         ({"plans": "zigzag_dash"}, r"plans must be a non-empty list"),
         ({"twin_config": "missing.yaml"}, r"twin_config: file .*missing.yaml not found"),
     ],

@@ -284,7 +284,7 @@ def test_flight_coverage_errors_switches_and_false_time() -> None:
     fs = score_flight({"a": a, "b": b}, epochs)
     sc = pool([fs])
     ua, ub = sc.uavs
-    # epoch 0: both on the ground, so tracks 1 and 7 are false there
+    # epoch 0: both on the ground: tracks 1 and 7 are on them, excused (not false)
     assert (ua.name, ua.epochs, ub.epochs) == ("a", 10, 10)
     assert ua.coverage_pct == pytest.approx(80.0)
     assert (ua.err_mean_m, ua.err_p95_m) == (pytest.approx(3.0), pytest.approx(3.0))
@@ -292,20 +292,31 @@ def test_flight_coverage_errors_switches_and_false_time() -> None:
     assert (ub.coverage_pct, ub.id_switches, ub.fragmentations) == (100.0, 0, 0)
     assert ub.err_mean_m == pytest.approx(4.0)
     assert fs.uavs[0].track_ids == (1, 1, 1, 1, None, None, 2, 2, 2, 2)
-    # false: 2 tracks at epoch 0 (on the ground) + clutter at epochs 2, 3
-    assert sc.false_track_s == pytest.approx(4.0)
+    # false: the clutter at epochs 2, 3; excused: the 2 tracks at epoch 0
+    assert sc.false_track_s == pytest.approx(2.0)
+    assert sc.excused_track_s == pytest.approx(2.0)
+    assert fs.assignments[0].excused == (("a", 1), ("b", 7))
+    assert fs.assignments[0].false_ids == ()
     assert sc.coverage_pct == pytest.approx(90.0)
     assert (sc.id_switches, sc.fragmentations, sc.uav_epochs, sc.epochs) == (1, 1, 20, 11)
-    # per-epoch GOSPA: epoch 0 two false; epoch 1 both assigned (9 + 16); epoch 2 plus clutter
-    assert fs.distance[0] == pytest.approx(math.sqrt(2 * HALF))
+    # per-epoch GOSPA: epoch 0 nothing to score; epoch 1 both assigned (9 + 16); epoch 2 plus
+    # clutter
+    assert fs.distance[0] == pytest.approx(0.0)
     assert fs.distance[1] == pytest.approx(5.0)
     assert fs.distance[2] == pytest.approx(math.sqrt(25.0 + HALF))
     assert fs.distance[5] == pytest.approx(math.sqrt(16.0 + HALF))
     assert sc.gospa_mean_m == pytest.approx(float(np.mean(fs.distance)))
     assert sc.missed_mean == pytest.approx(2 * HALF / 11)
-    assert sc.false_mean == pytest.approx(4 * HALF / 11)
+    assert sc.false_mean == pytest.approx(2 * HALF / 11)
     assert sc.localisation_mean == pytest.approx((10 * 16.0 + 8 * 9.0) / 11)
     assert fs.assignments[2].pairs == (("a", 1), ("b", 7))
+    # without the rule the two tracks on the ground are false at epoch 0
+    strict = score_flight({"a": a, "b": b}, epochs, MultiScoreSettings(excuse_grounded=False))
+    st = pool([strict])
+    assert (st.false_track_s, st.excused_track_s) == (pytest.approx(4.0), 0.0)
+    assert strict.distance[0] == pytest.approx(math.sqrt(2 * HALF))
+    assert st.false_mean == pytest.approx(4 * HALF / 11)
+    assert strict.assignments[0].false_ids == (1, 7)
     assert fs.assignments[2].false_ids == (9,)
 
 
@@ -373,11 +384,41 @@ def test_flight_airborne_mask_and_function() -> None:
     )
     for fs in (by_mask, by_fn):
         assert fs.uavs[0].epochs == 4
-        assert pool([fs]).false_track_s == pytest.approx(7.0)
+        # the track is on the UAV at the 7 other epochs: excused, not false
+        assert pool([fs]).false_track_s == 0.0
+        assert pool([fs]).excused_track_s == pytest.approx(7.0)
+    strict = score_flight(
+        {"a": UavTruth(a.t, a.enu, mask)}, epochs, MultiScoreSettings(excuse_grounded=False)
+    )
+    assert pool([strict]).false_track_s == pytest.approx(7.0)
     # the default rule at another threshold: 50 m up is not above 60 m
     high = score_flight({"a": a}, epochs, MultiScoreSettings(airborne_min_m=60.0))
     assert high.uavs[0].epochs == 0
     assert math.isnan(pool([high]).coverage_pct)
+
+
+def test_grounded_uav_excuses_one_close_track() -> None:
+    a = _truth(0.0, 0.0)
+    mask = a.t >= T0 + 100.0  # never airborne in these epochs
+    truth = {"a": UavTruth(a.t, a.enu, mask)}
+    at = _at(a, T0 + 1.0)
+    # two tracks on the grounded UAV (3 and 20 m off) and one 150 m away
+    ep = EpochTracks(
+        T0 + 1.0,
+        (_est(4, at, (20.0, 0.0, 0.0)), _est(5, at, (3.0, 0.0, 0.0)), _est(6, at, (150.0, 0, 0))),
+    )
+    fs = score_flight(truth, [ep])
+    # the closer one is excused; the second track on the UAV and the far one stay false
+    assert fs.assignments[0].excused == (("a", 5),)
+    assert fs.assignments[0].false_ids == (4, 6)
+    assert fs.false_estimates == 2 and fs.excused_estimates == 1
+    assert fs.distance[0] == pytest.approx(math.sqrt(2 * HALF))
+    # a track that GOSPA assigns to an airborne UAV is never excused by a grounded one
+    b = _truth(0.0, 10.0)  # airborne, 10 m from "a"
+    fs2 = score_flight({"a": UavTruth(a.t, a.enu, mask), "b": b}, [ep])
+    assert fs2.assignments[0].pairs == (("b", 5),)
+    assert fs2.assignments[0].excused == (("a", 4),)
+    assert fs2.assignments[0].false_ids == (6,)
 
 
 def test_pool_flights() -> None:

@@ -228,7 +228,7 @@ def _run_multi(
         tasks = [
             MultiScoreTask(
                 f, p, site, definition.grid_hz, settings.airborne_min_m,
-                settings.observable_window_s,
+                settings.observable_window_s, definition.excuse_grounded,
             )
             for p in profiles
             for f in flights
@@ -252,7 +252,12 @@ def _run_multi(
     print(
         f"pooled over {len(flights)} {args.split} flights, {definition.grid_hz:g} Hz grid, "
         f"GOSPA p 2, c 100 m, alpha 2; a UAV counts when more than "
-        f"{settings.airborne_min_m:g} m above its first truth sample:"
+        f"{settings.airborne_min_m:g} m above its first truth sample"
+        + (
+            "; a track on a UAV that is not (yet, or any longer) airborne is excused, not false:"
+            if definition.excuse_grounded
+            else "; a track on a UAV that is not airborne is false:"
+        )
     )
     print(text_multi(scores))
     print()

@@ -348,7 +348,8 @@ def format_multi(sc: Any) -> str:
     """The multi-target score as a small table: the set, then one row per UAV."""
     lines = [
         f"GOSPA (p 2, c 100 m, alpha 2) mean {sc.gospa_mean_m:.1f} m over {sc.epochs} epochs; "
-        f"false-track time {sc.false_track_s:.1f} s; {sc.id_switches} id switches "
+        f"false-track time {sc.false_track_s:.1f} s (and {sc.excused_track_s:.1f} s on UAVs "
+        f"not airborne, excused); {sc.id_switches} id switches "
         f"({sc.id_switches_kept} on kept correspondences)",
         f"{'UAV':<8} | {'airborne epochs':>15} | {'coverage %':>10} | {'error mean m':>12} | "
         f"{'p95 m':>7} | {'id switches':>11}",

@@ -205,7 +205,8 @@ def write_targets(flight: Flight, profile: Profile, site: Site, path: str, hz: f
     sc = pool([score_flight(truths, epochs)])
     print(
         f"  GOSPA (p 2, c 100 m, alpha 2) mean {sc.gospa_mean_m:.1f} m; false-track time "
-        f"{sc.false_track_s:.0f} s of {len(epochs) / hz:.0f} s"
+        f"{sc.false_track_s:.0f} s of {len(epochs) / hz:.0f} s (and {sc.excused_track_s:.0f} s "
+        "on UAVs not airborne, excused)"
     )
     for u in sc.uavs:
         print(

@@ -51,10 +51,22 @@ published track. GOSPA's optimal assignment then gives, per UAV:
   (so that a benchmark can attribute them, e.g. to the crossings of two UAVs).
 
 and per flight: ``false_track_s``, the number of estimates left unassigned summed over the
-epochs times ``step_s`` (a track on a UAV that is not airborne is false); the mean GOSPA
+epochs times ``step_s``; the mean GOSPA
 distance over the epochs and the means of its three parts (p-th powers of metres; the mean
 distance is not the root of the summed mean parts). A flight's samples are kept so that
 :func:`pool` pools flights exactly (epochs pooled; per-UAV figures by vehicle name).
+
+**A UAV that is not airborne** (on its pad, or in the last metres of a take-off or landing)
+is neither required nor forbidden: its epochs are not in its coverage, and with
+``excuse_grounded`` (the default) a track that GOSPA's assignment leaves false but that is
+closer than ``c`` to such a UAV (its truth defined at the epoch) is **excused**: it leaves the
+epoch's false part and the false-track time and is counted in ``excused_track_s`` instead.
+Each UAV that is not airborne excuses at most one track (the pairs by minimum total squared
+distance, as GOSPA pairs them), so a second track on a landed UAV stays false. Removing
+estimates that the optimal assignment left unassigned cannot change that assignment, so the
+epoch's GOSPA is the GOSPA of the scene without them. Without the rule
+(``excuse_grounded=False``) a track following a UAV through its last 5 m of descent counts
+as false although it is on a real UAV (docs/benchmark.md has the figures both ways).
 """
 
 from __future__ import annotations
@@ -223,6 +235,9 @@ class MultiScoreSettings:
     step_s: float = 1.0  # grid step of the tracker's output
     airborne_min_m: float = 5.0  # above the UAV's first truth sample
     max_truth_gap_s: float = 2.0
+    # a track left false but within c of a UAV that is not airborne then (on its pad, taking
+    # off, landing; one track per such UAV) is excused: neither false nor scored
+    excuse_grounded: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.step_s) and self.step_s > 0.0):
@@ -260,6 +275,7 @@ class EpochAssignment:
     t: float
     pairs: tuple[tuple[str, int], ...]
     false_ids: tuple[int, ...]
+    excused: tuple[tuple[str, int], ...] = ()  # (UAV not airborne, track id) pairs
 
 
 @dataclass(frozen=True)
@@ -274,6 +290,7 @@ class FlightSamples:
     false_estimates: int  # unassigned estimates summed over the epochs
     uavs: tuple[UavSamples, ...]
     assignments: tuple[EpochAssignment, ...]
+    excused_estimates: int = 0  # estimates excused on a UAV not airborne, over the epochs
 
     @property
     def epochs(self) -> int:
@@ -321,6 +338,7 @@ class MultiScore:
     false_mean: float
     uavs: tuple[UavScore, ...]
     id_switches_kept: int = 0
+    excused_track_s: float = 0.0  # track time excused on UAVs not airborne
 
 
 def id_switches(track_ids: Sequence[int | None]) -> int:
@@ -478,7 +496,7 @@ def score_flight(
     ids: dict[str, list[int | None]] = {name: [] for name in names}
     when: dict[str, list[float]] = {name: [] for name in names}
     errs: dict[str, list[float]] = {name: [] for name in names}
-    n_false = 0
+    n_false = n_excused = 0
     assignments: list[EpochAssignment] = []
     kept = _KeptCorrespondence(s.gospa.c_m)
     for k, epoch in enumerate(outputs):
@@ -511,10 +529,27 @@ def score_flight(
             errs[name].append(e)
             pairs.append((name, track_ids[a]))
             used.add(a)
+        excused: tuple[tuple[str, int], ...] = ()
+        if s.excuse_grounded:
+            grounded = [n for n in names if not air[n][k] and np.isfinite(pos[n][k, 0])]
+            # (with alpha < 2 a pair at c or more stays in GOSPA's assignment: not excusable)
+            held = {a for a in g.assignment if a is not None}
+            left = [j for j in range(len(track_ids)) if j not in used and j not in held]
+            if grounded and left:
+                G = np.array([pos[n][k] for n in grounded], dtype=float)
+                excused = _excuse(grounded, G, [track_ids[j] for j in left], Y[left], s.gospa)
+                if excused:
+                    fal[k] -= len(excused) * s.gospa.c_m**s.gospa.p / s.gospa.alpha
+                    fal[k] = max(fal[k], 0.0)
+                    dist[k] = (loc[k] + mis[k] + fal[k]) ** (1.0 / s.gospa.p)
+                    used.update(j for j in left if track_ids[j] in {tid for _, tid in excused})
+                    n_excused += len(excused)
         false_ids = tuple(tid for j, tid in enumerate(track_ids) if j not in used)
         n_false += len(false_ids)
         kept.step(float(grid_t[k]), present, X, track_ids, Y)
-        assignments.append(EpochAssignment(float(grid_t[k]), tuple(pairs), false_ids))
+        assignments.append(
+            EpochAssignment(float(grid_t[k]), tuple(pairs), false_ids, excused)
+        )
 
     sw = {name: id_switch_indices(ids[name]) for name in names}
     uavs = tuple(
@@ -542,6 +577,21 @@ def score_flight(
         false_estimates=n_false,
         uavs=uavs,
         assignments=tuple(assignments),
+        excused_estimates=n_excused,
+    )
+
+
+def _excuse(
+    names: list[str], G: FloatArray, track_ids: list[int], Y: FloatArray, g: GospaSettings
+) -> tuple[tuple[str, int], ...]:
+    """The tracks left false that follow a UAV that is not airborne: one track per such UAV,
+    closer than the cut-off, by minimum total squared distance."""
+    D = cdist(G, Y)
+    r, c = linear_sum_assignment(np.minimum(D, g.c_m) ** 2)
+    return tuple(
+        (names[a], track_ids[b])
+        for a, b in zip(r.tolist(), c.tolist(), strict=True)
+        if D[a, b] < g.c_m
     )
 
 
@@ -612,6 +662,7 @@ def pool(flights: Sequence[FlightSamples]) -> MultiScore:
         false_mean=_mean([f.false for f in flights]),
         uavs=tuple(uav_scores),
         id_switches_kept=sum(u.id_switches_kept for u in all_u),
+        excused_track_s=float(sum(f.excused_estimates * f.step_s for f in flights)),
     )
 
 

@@ -533,7 +533,8 @@ class EvaluatorNode(Node):
                  ("epochs", str(ms.epochs)), ("GOSPA mean m", _num(ms.gospa_mean_m)),
                  ("coverage %", _num(ms.coverage_pct)), ("id switches", str(ms.id_switches)),
                  ("id switches, kept correspondence", str(ms.id_switches_kept)),
-                 ("false-track s", _num(ms.false_track_s))]
+                 ("false-track s", _num(ms.false_track_s)),
+                 ("tracks on grounded UAVs s", _num(ms.excused_track_s))]
                 + [(f"{u.name} coverage %", _num(u.coverage_pct)) for u in ms.uavs],
             ))
         values.append(("clock jumps back", str(self.clock_jumps_back)))

@@ -24,7 +24,9 @@ Keys (unknown keys are errors naming the file and the key):
     tracks; see :mod:`uav_fusion.core.multiscore`);
 ``scoring``
     ``grid_hz`` (10; 1 for ``multi``), ``airborne_min_m`` (5), ``fresh_age_s`` (1),
-    ``gross_error_m`` (100), ``observable_window_s`` (2), ``nees_probability`` (0.95).
+    ``gross_error_m`` (100), ``observable_window_s`` (2), ``nees_probability`` (0.95),
+    ``excuse_grounded`` (true; ``multi`` only: a track on a UAV that is not airborne is
+    excused rather than false, see :mod:`uav_fusion.core.multiscore`).
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ _SCORING_KEYS = (
     "gross_error_m",
     "observable_window_s",
     "nees_probability",
+    "excuse_grounded",
 )
 
 
@@ -96,6 +99,7 @@ class BenchDefinition:
     settings: ScoreSettings
     source: Path
     targets: str = "single"
+    excuse_grounded: bool = True  # multi: tracks on UAVs not airborne are not false
 
     @property
     def multi(self) -> bool:
@@ -238,6 +242,9 @@ def definition_from_dict(doc: Any, source: Path) -> BenchDefinition:
         max_truth_gap_s=d.max_truth_gap_s,
         nees_probability=prob,
     )
+    excuse = sc.get("excuse_grounded", True)
+    if not isinstance(excuse, bool):
+        raise ConfigError(f"{sw}: excuse_grounded must be true or false, got {excuse!r}")
     desc = doc.get("description", "") or ""
     return BenchDefinition(
         name=str(doc.get("name", source.stem)),
@@ -250,6 +257,7 @@ def definition_from_dict(doc: Any, source: Path) -> BenchDefinition:
         settings=settings,
         source=source,
         targets=str(targets),
+        excuse_grounded=excuse,
     )
 
 
