@@ -105,6 +105,27 @@ def test_a_hung_teardown_is_forced_out_with_a_non_zero_exit() -> None:
     assert "shutdown did not finish within 1 s; forcing the exit" in res.stderr
 
 
+def test_a_teardown_that_locks_the_interpreter_is_ended_with_its_stack() -> None:
+    # a C call made without releasing the interpreter (as rclpy calls into DDS) starves the
+    # watchdog's timer thread: the interpreter-independent watchdog ends the process
+    code = (
+        "import ctypes\n"
+        "from rclpy.node import Node\n"
+        "from uav_fusion.ros.runtime import run_node\n"
+        "class Locked(Node):\n"
+        "    def __init__(self):\n"
+        "        super().__init__('locked')\n"
+        "    def destroy_node(self):\n"
+        "        ctypes.PyDLL(None).sleep(60)\n"
+        "raise SystemExit(run_node(Locked, ['locked'], finished=lambda n: True, "
+        "stop_grace_s=1.0))\n"
+    )
+    res = _run_code(code, timeout=50)
+    assert res.returncode != 0, res.stderr
+    assert "Timeout (0:00:03)!" in res.stderr, res.stderr
+    assert "in destroy_node" in res.stderr, res.stderr
+
+
 def test_a_hung_stop_hook_after_a_signal_is_forced_out() -> None:
     code = (
         "import os, signal, threading, time\n"

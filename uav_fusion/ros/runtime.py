@@ -20,7 +20,12 @@
 5. **Stop.** :attr:`App.on_stop` (flush, drain, write a report) with the context still
    valid, then the nodes are destroyed and rclpy shut down, all bounded by a watchdog of
    :attr:`App.stop_grace_s` seconds: if the teardown hangs (DDS while peers vanish, a stuck
-   hook) the process says so and exits with :data:`EXIT_FORCED`.
+   hook) the process says so and exits with :data:`EXIT_FORCED`. A teardown stuck inside a
+   call that keeps the interpreter locked (rclpy calls into the middleware without releasing
+   it, so a blocked DDS call freezes every Python thread, the watchdog's too) is ended by a
+   second watchdog that needs no interpreter (:mod:`faulthandler`): :data:`HARD_EXIT_SLACK_S`
+   later it writes every thread's stack to stderr, which shows where it hung, and exits with
+   status 1.
 
 Exit status: :data:`EXIT_OK` on a clean stop (signal or work done), :data:`EXIT_FAILED` when
 the app failed (an exception in a callback, or :attr:`App.status` says so),
@@ -30,6 +35,7 @@ forced the exit.
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -52,6 +58,8 @@ EXIT_FORCED = 3
 
 #: Default wall seconds the teardown (stop hook, node destruction, rclpy shutdown) may take.
 SHUTDOWN_GRACE_S = 10.0
+#: Seconds after the grace at which the interpreter-independent watchdog ends the process.
+HARD_EXIT_SLACK_S = 2.0
 
 
 class UsageError(UavFusionError):
@@ -113,13 +121,15 @@ def startup_line(app: App) -> str:
 
 
 class _Watchdog:
-    """Forces the process out if the teardown does not finish in time."""
+    """Forces the process out if the teardown does not finish in time (module text, step 5):
+    a timer thread, and behind it faulthandler's, which runs without the interpreter."""
 
     def __init__(self, name: str, grace_s: float) -> None:
         self.name = name
         self.grace_s = grace_s
         self._timer = threading.Timer(grace_s, self._fire)
         self._timer.daemon = True
+        self._hard = False
 
     def _fire(self) -> None:
         print(
@@ -132,10 +142,21 @@ class _Watchdog:
 
     def __enter__(self) -> _Watchdog:
         self._timer.start()
+        err = sys.__stderr__
+        try:
+            if err is not None:
+                faulthandler.dump_traceback_later(
+                    self.grace_s + HARD_EXIT_SLACK_S, exit=True, file=err
+                )
+                self._hard = True
+        except (OSError, ValueError, RuntimeError):  # no usable stderr descriptor
+            self._hard = False
         return self
 
     def __exit__(self, *_exc: object) -> None:
         self._timer.cancel()
+        if self._hard:
+            faulthandler.cancel_dump_traceback_later()
 
 
 class _Signals:
