@@ -537,13 +537,14 @@ def score_flight(
             left = [j for j in range(len(track_ids)) if j not in used and j not in held]
             if grounded and left:
                 G = np.array([pos[n][k] for n in grounded], dtype=float)
-                excused = _excuse(grounded, G, [track_ids[j] for j in left], Y[left], s.gospa)
-                if excused:
-                    fal[k] -= len(excused) * s.gospa.c_m**s.gospa.p / s.gospa.alpha
-                    fal[k] = max(fal[k], 0.0)
+                hits = _excuse(G, Y[left], s.gospa.c_m)
+                if hits:
+                    excused = tuple((grounded[a], track_ids[left[b]]) for a, b in hits)
+                    used.update(left[b] for _, b in hits)
+                    n_excused += len(hits)
+                    unit = s.gospa.c_m**s.gospa.p / s.gospa.alpha
+                    fal[k] = max(fal[k] - len(hits) * unit, 0.0)
                     dist[k] = (loc[k] + mis[k] + fal[k]) ** (1.0 / s.gospa.p)
-                    used.update(j for j in left if track_ids[j] in {tid for _, tid in excused})
-                    n_excused += len(excused)
         false_ids = tuple(tid for j, tid in enumerate(track_ids) if j not in used)
         n_false += len(false_ids)
         kept.step(float(grid_t[k]), present, X, track_ids, Y)
@@ -581,18 +582,13 @@ def score_flight(
     )
 
 
-def _excuse(
-    names: list[str], G: FloatArray, track_ids: list[int], Y: FloatArray, g: GospaSettings
-) -> tuple[tuple[str, int], ...]:
-    """The tracks left false that follow a UAV that is not airborne: one track per such UAV,
-    closer than the cut-off, by minimum total squared distance."""
+def _excuse(G: FloatArray, Y: FloatArray, c_m: float) -> list[tuple[int, int]]:
+    """(UAV row of ``G``, track row of ``Y``) pairs: the tracks left false that follow a UAV
+    that is not airborne, one per such UAV, closer than the cut-off, by minimum total squared
+    distance."""
     D = cdist(G, Y)
-    r, c = linear_sum_assignment(np.minimum(D, g.c_m) ** 2)
-    return tuple(
-        (names[a], track_ids[b])
-        for a, b in zip(r.tolist(), c.tolist(), strict=True)
-        if D[a, b] < g.c_m
-    )
+    r, c = linear_sum_assignment(np.minimum(D, c_m) ** 2)
+    return [(a, b) for a, b in zip(r.tolist(), c.tolist(), strict=True) if D[a, b] < c_m]
 
 
 def _pct(num: int, den: int) -> float:
