@@ -621,6 +621,36 @@ def test_below_ground_means_beyond_the_reports_vertical_sigma(
     assert obj.score(cfg) == pytest.approx(obj.score(base) - (8.0 if ghost else 0.0))
 
 
+@pytest.mark.parametrize("release", [0.0, 1.0])
+@pytest.mark.parametrize(
+    ("heights_m", "vehicle_with_release"),
+    [
+        # seen at 60 m, then low far out: reports around the ground (a UAV's low pass)
+        ([60.0] * 24 + [0.0] * 80, False),
+        # a car: reports scattered +-15 m around 1 m, never clearly in the air
+        ([1.0 + (15.0 if k % 2 else -15.0) for k in range(104)], True),
+        # 15 m up for a while, above ground_alt_m but within its reports' sigma (20 m): a
+        # ground vehicle still once low again
+        ([15.0] * 40 + [0.0] * 80, True),
+    ],
+)
+def test_an_object_once_clearly_in_the_air_is_never_a_ground_vehicle(
+    heights_m: list[float], vehicle_with_release: bool, release: float
+) -> None:
+    cfg = dataclasses.replace(ScoreConfig(), ground_release_sigmas=release)
+    table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 20.0**2)))
+    for k, h in enumerate(heights_m):
+        obj = table.update(
+            RadarTrack(10.0 + 0.25 * k, 1, 0.0, 0.0, 0.0, 600.0, 300.0, h,
+                       (0.0, 5.0, 0.0), 0.5, None, -10.0)
+        )  # fmt: skip
+    assert obj.up < cfg.ground_alt_m  # low now, in every case
+    vehicle = vehicle_with_release if release else True
+    assert obj.aloft is not vehicle
+    no_ground = dataclasses.replace(cfg, ground_weight=0.0)
+    assert obj.score(cfg) == pytest.approx(obj.score(no_ground) - (3.0 if vehicle else 0.0))
+
+
 @pytest.mark.parametrize("nearest_only", [False, True])
 def test_an_rf_fix_credits_every_object_in_its_gate_or_only_the_nearest(
     nearest_only: bool,

@@ -14,9 +14,13 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   below the ground), is a multipath ghost (``-below_ground_weight``); one older than
   ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is
   clutter (``-stationary_weight``); one that moves but stays below ``ground_alt_m`` is a
-  ground vehicle (``-ground_weight``); one whose own filter's mean NIS (3 dof, with the
-  radar's polar R but a floor of ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS
-  below ``bird_rcs_dbsm`` is a bird (``-erratic_weight``);
+  ground vehicle (``-ground_weight``), unless its mean height has once stood more than
+  ``ground_release_sigmas`` (0: off) times its reports' mean vertical standard deviation
+  above ``ground_alt_m`` (:attr:`RadarObject.aloft`: a car never climbs, while a UAV flying
+  low far out has reports that scatter around the ground after it was seen in the air); one
+  whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
+  ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
+  bird (``-erratic_weight``);
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
   horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
   capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
@@ -59,6 +63,7 @@ class ScoreConfig:
     stationary_weight: float = 5.0
     ground_alt_m: float = 4.0
     ground_weight: float = 3.0
+    ground_release_sigmas: float = 0.0
     below_ground_m: float = 5.0
     below_ground_weight: float = 8.0
     below_ground_sigmas: float = 0.0
@@ -103,6 +108,7 @@ class RadarObject:
     """One radar track id: its own CV filter and the running evidence of the UAV score."""
 
     __slots__ = (
+        "aloft",
         "class_logit",
         "coasting",
         "first_t",
@@ -140,6 +146,7 @@ class RadarObject:
         self.fused_t: float | None = None
         self.signature: tuple[object, ...] | None = None
         self.coasting = False
+        self.aloft = False  # its mean height once stood clearly above ground_alt_m
 
     @property
     def age_s(self) -> float:
@@ -166,7 +173,7 @@ class RadarObject:
             s -= cfg.below_ground_weight
         elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
             s -= cfg.stationary_weight
-        elif self.up < cfg.ground_alt_m and self.n_reports > 1:
+        elif self.up < cfg.ground_alt_m and self.n_reports > 1 and not self.aloft:
             s -= cfg.ground_weight
         if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
             s -= cfg.erratic_weight
@@ -255,6 +262,9 @@ class ObjectTable:
             obj.sd_up = a * obj.sd_up + b * math.sqrt(r[5])
             if rcs is not None and math.isfinite(rcs):
                 obj.rcs_mean = a * obj.rcs_mean + b * rcs
+            k = cfg.ground_release_sigmas
+            if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
+                obj.aloft = True
         p = trk.uav_prob
         if p is not None and math.isfinite(p):
             # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
