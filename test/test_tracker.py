@@ -621,6 +621,32 @@ def test_below_ground_means_beyond_the_reports_vertical_sigma(
     assert obj.score(cfg) == pytest.approx(obj.score(base) - (8.0 if ghost else 0.0))
 
 
+@pytest.mark.parametrize(
+    ("support_max_cep_m", "cep_m", "supported"),
+    [
+        (0.0, 40.0, False),  # off: a fix discarded for its CEP is no evidence at all
+        (60.0, 40.0, True),  # too coarse to update a track, still evidence of an emitter
+        (60.0, 80.0, False),  # too coarse for either
+    ],
+)
+def test_a_fix_too_coarse_for_an_update_may_still_support_the_object_it_fits(
+    site: Site, support_max_cep_m: float, cep_m: float, supported: bool
+) -> None:
+    prof = load_profile("tracker")
+    assert prof.rf_max_cep_m == 20.0
+    score = dataclasses.replace(prof.score, rf_support_max_cep_m=support_max_cep_m)
+    tr = Tracker(dataclasses.replace(prof, score=score), site)
+    for k in range(5):
+        t = 100.0 + 0.25 * k
+        rep = RadarTrack(t, 7, 0.0, 0.0, 0.0, 400.0, 300.0, 30.0, (0.0, 0.0, 0.0), 0.3, None,
+                         -10.0)  # fmt: skip
+        tr.process_radar_frame(RadarFrame(t, (rep,)))
+    steps = tr.process_rf(RfAttempt(101.1, 1, True, 0.0, 0.0, 410.0, 305.0, cep_m, 4, 4))
+    assert [(s.status, s.reason) for s in steps] == [("discarded", "cep")]  # never an update
+    obj = tr.objects.objects[7]
+    assert obj.rf_support == (1.0 if supported else 0.0)
+
+
 @pytest.mark.parametrize("release", [0.0, 1.0])
 @pytest.mark.parametrize(
     ("heights_m", "vehicle_with_release"),

@@ -26,7 +26,10 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
   evidence of a UAV); with ``rf_nearest_only`` a fix credits only the object it fits best
   (smallest gate distance), not every object in its gate (clutter beside a UAV, or near a
-  UAV on its pad that the radar does not see, would share the UAV's emitter);
+  UAV on its pad that the radar does not see, would share the UAV's emitter); a fix too
+  coarse to update a track (CEP above the profile's ``measurement.rf.max_cep_m``) still
+  counts here when its CEP is at most ``rf_support_max_cep_m`` (0: never; single-UAV
+  tracker only);
 * agreement with the fused track: moving average of "this object's report had an NIS of at
   most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
   the track's R allows for correlated errors), times ``fused_weight``;
@@ -74,6 +77,7 @@ class ScoreConfig:
     rf_tau_s: float = 30.0
     rf_max: float = 3.0
     rf_window_s: float = 3.0
+    rf_support_max_cep_m: float = 0.0
     fused_weight: float = 1.5
     fused_tau_s: float = 10.0
     fused_nis: float = 3.0

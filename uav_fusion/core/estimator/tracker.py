@@ -714,6 +714,11 @@ class Tracker:
             return [self._step(t, RF, DISCARDED, "invalid", None, z, None)]
         max_cep = self.profile.rf_max_cep_m
         if max_cep is not None and a.cep is not None and a.cep > max_cep:
+            if a.cep <= self.cfg.rf_support_max_cep_m:
+                # too coarse to update the track, but still evidence of an emitter at the
+                # object it fits best (its gate grows with the CEP)
+                r = self.rf_r.r_for(a.cep, a.valid_sensors)
+                self.objects.rf_fix(t, a.e, a.n, 0.5 * (r[0] + r[2]))
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         r = self.rf_r.r_for(a.cep, a.valid_sensors)
         self.objects.rf_fix(t, a.e, a.n, 0.5 * (r[0] + r[2]))
