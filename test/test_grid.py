@@ -233,6 +233,35 @@ def test_radar_observable_epochs_and_airborne_rule() -> None:
     assert np.isnan(pool([score_grid(g, truth)]).observable_coverage_pct)
 
 
+def test_observable_coverage_after_the_start_up() -> None:
+    """Radar-observable epochs before the first track are the start-up; the coverage after it
+    counts only the later ones."""
+    prof = hand_profile(3.0)
+    x = np.array([0.0, 0.0, UP, 10.0, 0.0, 0.0])
+    truth = truth_line(20.0)
+    reports = np.arange(T0, T0 + 20.5, 0.5)  # the UAV is radar-observable throughout
+    # the first track comes 4 s in and is dropped after a 3 s coast: epochs 4..7 covered
+    steps = [step(T0 + 4.0, "initialised", x, P0)]
+    g = grid_from_steps(steps, prof, 1.0, T0, T0 + 20.0)
+    s = score_grid(g, truth, uav_report_t=reports)
+    first = int(np.flatnonzero(g.has_track)[0])
+    assert g.t[first] == T0 + 4.0
+    assert s.observable == 21 and s.observable_startup == 4 and s.observable_covered == 4
+    sc = pool([s])
+    assert sc.observable_coverage_pct == pytest.approx(100.0 * s.observable_covered / 21)
+    assert sc.observable_after_start_pct == pytest.approx(100.0 * s.observable_covered / 17)
+    assert sc.observable_after_start_pct > sc.observable_coverage_pct
+    # pooled over two flights: the start-up epochs of both are left out
+    both = pool([s, s])
+    assert both.observable_after_start_pct == pytest.approx(sc.observable_after_start_pct)
+    # a flight never tracked: every observable epoch is start-up, nothing after it
+    never = score_grid(grid_from_steps([], prof, 1.0, T0, T0 + 20.0), truth, reports)
+    assert never.observable_startup == 21
+    assert np.isnan(pool([never]).observable_after_start_pct)
+    # without labels: NaN
+    assert np.isnan(pool([score_grid(g, truth)]).observable_after_start_pct)
+
+
 def test_emitter_rejects_going_back_and_emits_on_advance() -> None:
     em = GridEmitter(10.0, 0.2, cv_predictor((1.0, 1.0, 1.0)))
     snap = TrackSnapshot(T0 + 0.05, np.zeros(6), np.eye(6), T0 + 0.05, True, 0)

@@ -17,6 +17,9 @@ Per flight, and pooled over flights (:func:`pool`):
 * the same coverage and gross share over the **radar-observable** epochs: airborne epochs with
   a radar report of the UAV within ``observable_window_s`` (2 s); the twin knows which reports
   are the UAV's (``bench_labels.json``); without labels these figures are NaN;
+  ``observable_after_start_pct`` is that coverage counted from the flight's first airborne
+  epoch with a confirmed track on (the radar-observable epochs before it are the start-up:
+  the time the tracker takes to find the UAV, against the ones it loses later);
 * NEES ``e^T P^-1 e`` of the published position covariance (``P``'s position block) on the
   covered epochs: ANEES (its mean; 3 for an honest covariance) and the share inside the
   two-sided ``nees_probability`` (95 %) chi-square(3) bounds (95 % for an honest one);
@@ -105,6 +108,7 @@ class GridSamples:
     observable_gross: int
     ttf_s: float
     restarts: int
+    observable_startup: int = 0  # radar-observable epochs before the first tracked one
 
 
 @dataclass(frozen=True)
@@ -133,6 +137,8 @@ class GridScore:
     gross_vertical_pct: float
     gross_age_p50_s: float
     gross_rf_pct: float  # share of gross epochs whose last accepted measurement was RF
+    # radar-observable coverage from each flight's first tracked airborne epoch on
+    observable_after_start_pct: float = math.nan
 
     def as_dict(self) -> dict[str, float | int]:
         return asdict(self)
@@ -203,6 +209,9 @@ def score_grid(
     vertical = np.abs(grid.x[cov, 2] - ee.truth_enu[cov, 2])
     gross = err > s.gross_error_m
 
+    air_idx = np.flatnonzero(airborne)
+    tracked = np.flatnonzero(airborne & grid.has_track)
+    n_start = 0
     if uav_report_t is None:
         n_obs, n_obs_cov, n_obs_gross = -1, 0, 0
     else:
@@ -216,12 +225,12 @@ def score_grid(
         gross_all = np.zeros(grid.t.size, dtype=bool)
         gross_all[np.flatnonzero(cov)] = gross
         n_obs_gross = int(np.count_nonzero(obs & gross_all))
+        first = int(tracked[0]) if tracked.size else grid.t.size
+        n_start = int(np.count_nonzero(obs[:first]))
 
-    air_idx = np.flatnonzero(airborne)
     ttf = math.nan
     if air_idx.size:
         t_air = grid.t[air_idx[0]]
-        tracked = np.flatnonzero(airborne & grid.has_track)
         if tracked.size:
             ttf = float(grid.t[tracked[0]] - t_air)
     return GridSamples(
@@ -238,6 +247,7 @@ def score_grid(
         observable_gross=n_obs_gross,
         ttf_s=ttf,
         restarts=grid.restarts,
+        observable_startup=n_start,
     )
 
 
@@ -253,6 +263,7 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
     n_obs = sum(x.observable for x in labelled)
     n_obs_cov = sum(x.observable_covered for x in labelled)
     n_obs_gross = sum(x.observable_gross for x in labelled)
+    n_obs_start = sum(x.observable_startup for x in labelled)
     vert = np.concatenate([x.vertical for x in samples]) if samples else np.zeros(0)
     ages = np.concatenate([x.ages for x in samples]) if samples else np.zeros(0)
     rf_last = np.concatenate([x.rf_last for x in samples]) if samples else np.zeros(0, bool)
@@ -283,6 +294,9 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
         gross_vertical_pct=_pct(int(np.count_nonzero(vert[gross] ** 2 > horiz2)), n_gross),
         gross_age_p50_s=float(np.median(ages[gross])) if n_gross else nan,
         gross_rf_pct=_pct(int(np.count_nonzero(rf_last[gross])), n_gross),
+        observable_after_start_pct=(
+            _pct(n_obs_cov, n_obs - n_obs_start) if labelled else nan
+        ),
     )
 
 

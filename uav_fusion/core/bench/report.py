@@ -135,7 +135,8 @@ def markdown_table(scores: Mapping[str, GridScore]) -> str:
 CSV_FIELDS = (
     "profile", "flight", "plan", "seed", "split", "epochs", "coverage_pct",
     "fresh_coverage_pct", "err_mean_m", "err_p50_m", "err_p95_m", "err_max_m", "gross_pct",
-    "observable_epochs", "observable_coverage_pct", "observable_gross_pct", "anees",
+    "observable_epochs", "observable_coverage_pct", "observable_gross_pct",
+    "observable_after_start_pct", "anees",
     "nees_in95_pct", "ttf_s", "restarts", "gross_vertical_pct", "gross_age_p50_s",
     "gross_rf_pct", "steps", "seconds",
 )
@@ -150,6 +151,7 @@ FLIGHT_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("gross_pct", "gross %", ".1f"),
     ("observable_coverage_pct", "obs cov %", ".1f"),
     ("observable_gross_pct", "obs gross %", ".1f"),
+    ("observable_after_start_pct", "obs cov after 1st track %", ".1f"),
     ("anees", "ANEES", ".1f"),
     ("gross_vertical_pct", "gross: vertical %", ".0f"),
     ("gross_age_p50_s", "gross: age p50 s", ".1f"),
