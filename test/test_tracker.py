@@ -677,6 +677,37 @@ def test_an_object_once_clearly_in_the_air_is_never_a_ground_vehicle(
     assert obj.score(cfg) == pytest.approx(obj.score(no_ground) - (3.0 if vehicle else 0.0))
 
 
+@pytest.mark.parametrize("memory_s", [0.0, 30.0])
+def test_an_emitter_the_radar_does_not_see_yet_supports_the_object_that_appears_there(
+    memory_s: float,
+) -> None:
+    """Fixes that credit no object (a UAV on its pad, link on, no radar track) are kept for
+    ``rf_memory_s``; the first object that appears inside their gate takes their support,
+    decayed since; an object elsewhere, a fix too old or an object seen before get none."""
+    cfg = dataclasses.replace(ScoreConfig(), rf_memory_s=memory_s, rf_tau_s=15.0)
+    table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
+
+    def report(t: float, tid: int, east: float) -> RadarTrack:
+        return RadarTrack(t, tid, 0.0, 0.0, 0.0, east, 300.0, 20.0, (0.0, 0.0, 0.0), 0.3,
+                          None, -10.0)  # fmt: skip
+
+    table.update(report(0.0, 9, 2000.0))  # an object far away, seen before the fixes
+    assert table.rf_fix(10.0, 500.0, 300.0, 400.0) == 0  # an old fix, beyond the memory
+    assert table.rf_fix(50.0, 505.0, 300.0, 400.0) == 0
+    assert table.rf_fix(54.0, 495.0, 302.0, 400.0) == 0
+    far = table.update(report(60.0, 2, 900.0))  # a new object, but not where the fixes are
+    assert far.rf_support == 0.0
+    obj = table.update(report(60.0, 1, 500.0))  # appears at the emitter
+    if memory_s:
+        want = math.exp(-10.0 / 15.0) + math.exp(-6.0 / 15.0)
+        assert obj.rf_support == pytest.approx(want) and obj.rf_t == 60.0
+        # used up: the next object there gets nothing
+        assert table.update(report(60.5, 3, 500.0)).rf_support == 0.0
+    else:
+        assert obj.rf_support == 0.0
+    assert table.objects[9].rf_support == 0.0
+
+
 @pytest.mark.parametrize("nearest_only", [False, True])
 def test_an_rf_fix_credits_every_object_in_its_gate_or_only_the_nearest(
     nearest_only: bool,

@@ -29,7 +29,10 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   UAV on its pad that the radar does not see, would share the UAV's emitter); a fix too
   coarse to update a track (CEP above the profile's ``measurement.rf.max_cep_m``) still
   counts here when its CEP is at most ``rf_support_max_cep_m`` (0: never; single-UAV
-  tracker only);
+  tracker only); a fix that credits no object at all (an emitter the radar does not see
+  yet: a UAV on its pad with its link on) is kept for ``rf_memory_s`` (0: not kept), and an
+  object seen for the first time takes the support of the kept fixes inside its gate, as
+  if it had been credited when each was made (decayed since);
 * agreement with the fused track: moving average of "this object's report had an NIS of at
   most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
   the track's R allows for correlated errors), times ``fused_weight``;
@@ -78,6 +81,7 @@ class ScoreConfig:
     rf_max: float = 3.0
     rf_window_s: float = 3.0
     rf_support_max_cep_m: float = 0.0
+    rf_memory_s: float = 0.0
     fused_weight: float = 1.5
     fused_tau_s: float = 10.0
     fused_nis: float = 3.0
@@ -203,6 +207,7 @@ class ObjectTable:
         self.cfg = cfg
         self.radar_r = radar_r
         self.objects: dict[int, RadarObject] = {}
+        self._orphans: list[tuple[float, float, float, float]] = []
 
     def update(self, trk: RadarTrack, r: PackedR | None = None) -> RadarObject:
         """Fold one report (with its R, computed here when not given) into its object
@@ -219,6 +224,8 @@ class ObjectTable:
         u = trk.u
         if r is None:
             r = self.radar_r.r_at(e, n, u)
+        if obj.kf is None and self._orphans:
+            self._adopt_orphans(obj, t, e, n, r)
         kf = obj.kf
         n_reports = obj.n_reports
         rcs = trk.rcs_dbsm
@@ -350,4 +357,37 @@ class ObjectTable:
             obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
             obj.rf_t = t
             hits += 1
+        if hits == 0 and cfg.rf_memory_s > 0:
+            keep = t - cfg.rf_memory_s
+            self._orphans = [o for o in self._orphans if o[0] >= keep]
+            self._orphans.append((t, e, n, var_m2))
         return hits
+
+    def _adopt_orphans(
+        self, obj: RadarObject, t: float, e: float, n: float, r: PackedR
+    ) -> None:
+        """Give a new object the support of the kept fixes that credited nobody and fall
+        inside its gate (first report ``e``, ``n`` with R ``r``); those fixes are used up."""
+        cfg = self.cfg
+        keep = t - cfg.rf_memory_s
+        left: list[tuple[float, float, float, float]] = []
+        sup = 0.0
+        for o in self._orphans:
+            tf, fe, fn, var = o
+            if tf < keep:
+                continue
+            s00 = r[0] + var
+            s11 = r[3] + var
+            s01 = r[1]
+            det = s00 * s11 - s01 * s01
+            de = fe - e
+            dn = fn - n
+            q = s11 * de * de - 2.0 * s01 * de * dn + s00 * dn * dn
+            if det > 0 and q / det <= RF_GATE_99_2DOF:
+                sup += math.exp(-(t - tf) / cfg.rf_tau_s) if cfg.rf_tau_s > 0 else 0.0
+            else:
+                left.append(o)
+        self._orphans = left
+        if sup:
+            obj.rf_support = sup
+            obj.rf_t = t
