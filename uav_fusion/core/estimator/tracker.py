@@ -713,15 +713,15 @@ class Tracker:
         if not math.isfinite(t + a.e + a.n):
             return [self._step(t, RF, DISCARDED, "invalid", None, z, None)]
         max_cep = self.profile.rf_max_cep_m
-        if max_cep is not None and a.cep is not None and a.cep > max_cep:
-            if a.cep <= self.cfg.rf_support_max_cep_m:
-                # too coarse to update the track, but still evidence of an emitter at the
-                # object it fits best (its gate grows with the CEP)
-                r = self.rf_r.r_for(a.cep, a.valid_sensors)
-                self.objects.rf_fix(t, a.e, a.n, 0.5 * (r[0] + r[2]))
+        coarse = max_cep is not None and a.cep is not None and a.cep > max_cep
+        # a fix too coarse to update the track may still be evidence of an emitter at the
+        # object it fits best (its gate grows with the CEP)
+        if coarse and not (a.cep is not None and a.cep <= self.cfg.rf_support_max_cep_m):
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         r = self.rf_r.r_for(a.cep, a.valid_sensors)
         self.objects.rf_fix(t, a.e, a.n, 0.5 * (r[0] + r[2]))
+        if coarse:
+            return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         if not self._advance(t):
             return [self._step(t, RF, DISCARDED, "out_of_order", None, z, None)]
         f = self.filter
