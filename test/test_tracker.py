@@ -16,7 +16,7 @@ import yaml
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimator import load_profile, run_flight
 from uav_fusion.core.estimator.association import ObjectTable, ScoreConfig
-from uav_fusion.core.estimator.components import FixedRadarR
+from uav_fusion.core.estimator.components import FixedRadarR, RadarAlignment
 from uav_fusion.core.estimator.runner import run_tracker
 from uav_fusion.core.estimator.tracker import Tracker, TrackerStep
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
@@ -102,6 +102,14 @@ def _imm(**changes: Any) -> dict[str, Any]:
             lambda d: d["association"].update(below_ground_sigmas=-1.0),
             r"association\.below_ground_sigmas must be >= 0",
         ),
+        (
+            lambda d: d["measurement"]["radar"].update(az_bias_deg=12.0),
+            r"measurement\.radar\.az_bias_deg must be a finite angle of at most 10 degrees",
+        ),
+        (
+            lambda d: d["measurement"]["radar"].update(el_bias_deg=float("nan")),
+            r"measurement\.radar: 'el_bias_deg' must be finite",
+        ),
     ],
 )
 def test_tracker_profile_errors_name_file_and_key(
@@ -123,6 +131,10 @@ def test_tracker_profiles_load_and_round_trip() -> None:
         again = profile_from_dict(p.as_dict())
         assert again.imm_transition == p.imm_transition and again.score == p.score
         assert again.smoother_lag_s == p.smoother_lag_s
+        assert (again.radar_az_bias_deg, again.radar_el_bias_deg) == (
+            p.radar_az_bias_deg,
+            p.radar_el_bias_deg,
+        )
     assert load_profile("tracker_smoothed").smoother_lag_s == 3.0
     assert not load_profile("paper").uses_tracker
 
@@ -467,6 +479,36 @@ def test_far_gate_keeps_the_track_beyond_the_range_gate_with_horizontal_updates(
     first_far = min(s.t for s in steps2 if s.source == "radar" and len(s.z) == 2)
     before = [(s.status, s._state) for s in steps if s.t < first_far]
     assert before == [(s.status, s._state) for s in steps2 if s.t < first_far]
+
+
+def test_a_radar_mount_misalignment_is_corrected_with_the_calibrated_bias(site: Site) -> None:
+    # the radar reports every angle 2 deg too far clockwise and 1 deg too high (turning the
+    # reports by minus the bias adds it); the RF fixes are unbiased
+    sc = Scene(site, seed=12)
+    sc.build(200.0)
+    r0 = (float(sc.r0[0]), float(sc.r0[1]), float(sc.r0[2]))
+    skew = RadarAlignment(r0, -2.0, -1.0)
+    stream = [skew.frame(x) if isinstance(x, RadarFrame) else x for x in sc.stream()]
+    plain = load_profile("tracker").with_changes(radar_az_bias_deg=0.0, radar_el_bias_deg=0.0)
+    aligned = plain.with_changes(radar_az_bias_deg=2.0, radar_el_bias_deg=1.0)
+
+    def mean_error(profile: Any, items: list[RadarFrame | RfAttempt]) -> tuple[float, list]:  # type: ignore[type-arg]
+        steps = run_tracker(Tracker(profile, site), items)
+        late = [s for s in steps if s.counted and s.t >= 30.0]
+        assert len(late) > 500
+        return float(np.mean([sc.error(s) for s in late])), steps
+
+    e_plain, _ = mean_error(plain, stream)
+    e_aligned, steps = mean_error(aligned, stream)
+    # 2 deg at 400 m is 14 m across the beam, 1 deg is 7 m in height
+    assert e_plain > 10.0
+    assert e_aligned < 0.5 * e_plain
+    # the correction is the same as feeding the tracker the corrected reports
+    fixed = RadarAlignment(r0, 2.0, 1.0)
+    again = run_tracker(
+        Tracker(plain, site), [fixed.frame(x) if isinstance(x, RadarFrame) else x for x in stream]
+    )
+    assert [(s.status, s._state) for s in again] == [(s.status, s._state) for s in steps]
 
 
 def test_a_track_started_beyond_the_range_gate_takes_the_height_prior(site: Site) -> None:

@@ -16,6 +16,7 @@ from uav_fusion.core.estimator.components import (
     HuberWeight,
     MofN,
     PolarRadarR,
+    RadarAlignment,
     StudentTWeight,
     packed_to_array,
     validate_transition,
@@ -29,6 +30,7 @@ from uav_fusion.core.estimator.models import (
     kf_update_joseph,
     position_h,
 )
+from uav_fusion.core.records import RadarFrame, RadarTrack
 
 RAD = math.radians
 
@@ -80,6 +82,53 @@ def test_polar_r_low_elevation_inflation_hand_case() -> None:
     var_r = 2.0**2
     assert r[5] == pytest.approx(var_r * math.sin(el) ** 2 + var_el * math.cos(el) ** 2)
     assert r[3] == pytest.approx(var_r * math.cos(el) ** 2 + var_el * math.sin(el) ** 2)
+
+
+# --- radar misalignment ---------------------------------------------------------------------
+def _polar_report(radar: tuple[float, float, float], az: float, el: float, r: float) -> RadarTrack:
+    e0, n0, u0 = radar
+    return RadarTrack(
+        t=1.0, track_id=7, lat=35.7, lon=-78.7, h=123.0,
+        e=e0 + r * math.cos(RAD(el)) * math.sin(RAD(az)),
+        n=n0 + r * math.cos(RAD(el)) * math.cos(RAD(az)),
+        u=u0 + r * math.sin(RAD(el)),
+        vel_ned=(10.0, 0.0, -1.0), uav_prob=0.8, range_m=r, rcs_dbsm=-10.0,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("az", [45.0, 180.0, 300.0, -0.2])
+def test_radar_alignment_turns_a_report_back_to_the_true_angles(az: float) -> None:
+    radar = (10.0, -20.0, 5.0)
+    al = RadarAlignment(radar, az_bias_deg=0.5, el_bias_deg=0.3)
+    # the radar reported az + 0.5 deg and el + 0.3 deg; the truth is at (az, 10 deg, 1000 m)
+    got = al.track(_polar_report(radar, az + 0.5, 10.3, 1000.0))
+    want = _polar_report(radar, az, 10.0, 1000.0)
+    assert (got.e, got.n, got.u) == pytest.approx((want.e, want.n, want.u), abs=1e-9)
+    # the slant range is kept; the velocity is turned by the azimuth correction only
+    d = math.dist((got.e, got.n, got.u), radar)
+    assert d == pytest.approx(1000.0, abs=1e-9)
+    assert got.vel_ned == pytest.approx(
+        (10.0 * math.cos(RAD(0.5)), -10.0 * math.sin(RAD(0.5)), -1.0)
+    )
+    # everything else is the radar's own report
+    assert (got.t, got.track_id, got.lat, got.lon, got.h, got.uav_prob, got.rcs_dbsm) == (
+        1.0, 7, 35.7, -78.7, 123.0, 0.8, -10.0
+    )  # fmt: skip
+
+
+def test_radar_alignment_of_a_frame_and_without_a_bias() -> None:
+    radar = (0.0, 0.0, 0.0)
+    frame = RadarFrame(
+        1.0, (_polar_report(radar, 10.0, 5.0, 500.0), _polar_report(radar, 20.0, 3.0, 800.0))
+    )
+    assert RadarAlignment(radar, 0.0, 0.0).frame(frame) is frame  # nothing to do
+    empty = RadarFrame(2.0, ())
+    assert RadarAlignment(radar, 1.0, 0.0).frame(empty) is empty
+    out = RadarAlignment(radar, 1.0, -0.5).frame(frame)
+    assert out.t == 1.0 and len(out.tracks) == 2
+    for trk, (az, el) in zip(out.tracks, [(9.0, 5.5), (19.0, 3.5)], strict=True):
+        assert math.degrees(math.atan2(trk.e, trk.n)) == pytest.approx(az)
+        assert math.degrees(math.atan2(trk.u, math.hypot(trk.e, trk.n))) == pytest.approx(el)
 
 
 def test_cep_r_hand_cases() -> None:

@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimator.kalman import PackedR, pack_r
+from uav_fusion.core.records import RadarFrame, RadarTrack
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -132,6 +133,54 @@ class PolarRadarR:
             ra1 * u2 + el1 * l2,
             ra2 * u2 + el2 * l2 + f2,
         )
+
+
+@dataclass(frozen=True)
+class RadarAlignment:
+    """Correct the radar's mounting misalignment: every report is turned about the radar's
+    phase centre by ``-az_bias_deg`` in azimuth (clockwise from north, as the radar measures
+    it) and lowered by ``el_bias_deg`` in elevation, at its own range.
+
+    The biases are what :func:`uav_fusion.core.calibration.radar_alignment` measures against
+    RTK truth (median report-minus-truth azimuth and elevation). The report's NED velocity
+    is turned by the azimuth correction only (an elevation offset is not a rotation of the
+    frame). Only ``e``, ``n``, ``u`` and ``vel_ned`` change: the geodetic fields keep the
+    radar's own report.
+    """
+
+    radar_enu: tuple[float, float, float]
+    az_bias_deg: float
+    el_bias_deg: float
+
+    @property
+    def active(self) -> bool:
+        return bool(self.az_bias_deg or self.el_bias_deg)
+
+    def track(self, trk: RadarTrack) -> RadarTrack:
+        """One report, corrected."""
+        e0, n0, u0 = self.radar_enu
+        de, dn, du = trk.e - e0, trk.n - n0, trk.u - u0
+        rho = math.hypot(de, dn)
+        r = math.hypot(rho, du)
+        b = math.radians(self.az_bias_deg)
+        cb, sb = math.cos(b), math.sin(b)
+        # elevation lowered by el_bias at the same slant range
+        el = math.atan2(du, rho) - math.radians(self.el_bias_deg)
+        rho2 = r * math.cos(el)
+        k = rho2 / rho if rho > 1e-9 else 0.0
+        de2 = (de * cb - dn * sb) * k
+        dn2 = (dn * cb + de * sb) * k
+        vel = trk.vel_ned
+        if vel is not None:
+            vn, ve, vd = vel
+            vel = (vn * cb + ve * sb, ve * cb - vn * sb, vd)
+        return replace(trk, e=e0 + de2, n=n0 + dn2, u=u0 + r * math.sin(el), vel_ned=vel)
+
+    def frame(self, frame: RadarFrame) -> RadarFrame:
+        """Every report of a frame, corrected (the frame itself when there is nothing to do)."""
+        if not frame.tracks or not self.active:
+            return frame
+        return replace(frame, tracks=tuple(self.track(t) for t in frame.tracks))
 
 
 @dataclass(frozen=True)

@@ -74,6 +74,7 @@ from uav_fusion.core.estimator.kalman import PackedR, expand_upper
 from uav_fusion.core.estimator.profile import Profile
 from uav_fusion.core.estimator.track import nis_gate
 from uav_fusion.core.estimator.tracker import (
+    alignment_from_profile,
     motion_filter_from_profile,
     object_start,
     radar_gates2,
@@ -184,6 +185,7 @@ class MultiTracker:
         self.settings = settings or MultiSettings()
         self.cfg = profile.score
         self.radar_r = radar_model_from_profile(profile, site)
+        self._align = alignment_from_profile(profile, site)
         self.rf_r = rf_model_from_profile(profile)
         self.robust = robust_from_profile(profile)
         r_obj = self.radar_r
@@ -293,6 +295,8 @@ class MultiTracker:
 
     # --- radar ------------------------------------------------------------------------------
     def process_radar_frame(self, frame: RadarFrame) -> None:
+        if self._align is not None:
+            frame = self._align.frame(frame)
         t = frame.t
         cfg = self.cfg
         dv = self._extra_var

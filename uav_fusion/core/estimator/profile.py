@@ -28,6 +28,7 @@ SELECTIONS = ("largest_track", "online")
 ASSOCIATIONS = (*SELECTIONS, "track_score")
 MOTION_MODELS = ("cv", "imm")
 RADAR_MODELS = ("fixed", "polar")
+MAX_RADAR_BIAS_DEG = 10.0  # measurement.radar.az_bias_deg / el_bias_deg
 RF_MODELS = ("fixed", "cep")
 ROBUST = ("none", "student_t", "huber")
 SOURCES = (RADAR, RF)
@@ -75,6 +76,8 @@ class Profile:
     radar_floor_m: float = 0.0
     radar_low_el_gain: float = 0.0
     radar_low_el_deg: float = 4.0
+    radar_az_bias_deg: float = 0.0  # mounting misalignment, corrected on every report
+    radar_el_bias_deg: float = 0.0
     rf_model: str = "fixed"  # fixed (r_rf) | cep
     rf_cep_scale: float = 1.0
     rf_floor_m: float = 5.0
@@ -158,6 +161,8 @@ class Profile:
                 floor_m=self.radar_floor_m,
                 low_el_gain=self.radar_low_el_gain,
                 low_el_deg=self.radar_low_el_deg,
+                az_bias_deg=self.radar_az_bias_deg,
+                el_bias_deg=self.radar_el_bias_deg,
             )
             d["measurement"]["rf"].update(
                 model=self.rf_model,
@@ -200,7 +205,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "measurement": ("radar", "rf", "note"),
     "measurement.radar": (
         "R", "model", "sigma_range_m", "sigma_az_deg", "sigma_el_deg", "floor_m",
-        "low_el_gain", "low_el_deg",
+        "low_el_gain", "low_el_deg", "az_bias_deg", "el_bias_deg",
     ),
     "measurement.rf": (
         *("R", "model", "cep_scale", "floor_m", "ref_sensors", "sensor_exponent", "max_cep_m"),
@@ -357,6 +362,15 @@ def _validate_tracker(p: Profile, where: str) -> None:
     ):
         if not v >= 0:
             raise ConfigError(f"{where}: {key} must be >= 0 (a standard deviation), got {v}")
+    for key, v in (
+        ("measurement.radar.az_bias_deg", p.radar_az_bias_deg),
+        ("measurement.radar.el_bias_deg", p.radar_el_bias_deg),
+    ):
+        if not abs(v) <= MAX_RADAR_BIAS_DEG:
+            raise ConfigError(
+                f"{where}: {key} must be a finite angle of at most {MAX_RADAR_BIAS_DEG:g} "
+                f"degrees (a mounting misalignment), got {v}"
+            )
     if p.rf_max_cep_m is not None and not p.rf_max_cep_m > 0:
         raise ConfigError(f"{where}: measurement.rf.max_cep_m must be > 0 or null")
     if not p.rf_cep_scale > 0:
@@ -574,6 +588,8 @@ def _tracker_fields(
         ("floor_m", "radar_floor_m", 0.0),
         ("low_el_gain", "radar_low_el_gain", 0.0),
         ("low_el_deg", "radar_low_el_deg", 4.0),
+        ("az_bias_deg", "radar_az_bias_deg", 0.0),
+        ("el_bias_deg", "radar_el_bias_deg", 0.0),
     ):
         out[name] = _float(radar, key, at_r, default)
     if not out["radar_low_el_deg"] > 0:

@@ -68,6 +68,7 @@ from uav_fusion.core.estimator.components import (
     MofN,
     NoRobust,
     PolarRadarR,
+    RadarAlignment,
     RadarRModel,
     RfRModel,
     RobustWeight,
@@ -191,6 +192,18 @@ def radar_model_from_profile(profile: Profile, site: Site) -> RadarRModel:
     return FixedRadarR(pack_r(profile.r_radar))
 
 
+def alignment_from_profile(profile: Profile, site: Site) -> RadarAlignment | None:
+    """The radar's misalignment correction (``measurement.radar.az_bias_deg`` /
+    ``el_bias_deg``), or None when both are 0."""
+    if not (profile.radar_az_bias_deg or profile.radar_el_bias_deg):
+        return None
+    return RadarAlignment(
+        tuple(float(v) for v in site.radar.enu),  # type: ignore[arg-type]
+        profile.radar_az_bias_deg,
+        profile.radar_el_bias_deg,
+    )
+
+
 def rf_model_from_profile(profile: Profile) -> RfRModel:
     fixed = pack_r(profile.r_rf)
     if profile.rf_model == "cep":
@@ -250,6 +263,7 @@ class Tracker:
         self.site = site
         self.cfg = profile.score
         self.radar_r = radar_model_from_profile(profile, site)
+        self._align = alignment_from_profile(profile, site)
         self.rf_r = rf_model_from_profile(profile)
         self.robust = robust_from_profile(profile)
         r_obj = self.radar_r
@@ -424,7 +438,10 @@ class Tracker:
 
     # --- radar --------------------------------------------------------------------------
     def process_radar_frame(self, frame: RadarFrame) -> list[TrackerStep]:
-        """One radar frame; returns one step per report, in the frame's order."""
+        """One radar frame; returns one step per report, in the frame's order (a report's
+        step carries it as corrected for the radar's misalignment, when the profile sets one)."""
+        if self._align is not None:
+            frame = self._align.frame(frame)
         t = frame.t
         c = self.counters
         tracks = frame.tracks
