@@ -5,10 +5,17 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from uav_fusion.cli import main as cli_main
-from uav_fusion.core.calibration import calibrate, format_calibration
+from uav_fusion.core.calibration import (
+    angle_residuals,
+    calibrate,
+    format_alignment,
+    format_calibration,
+    radar_alignment,
+)
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.radar_class import uav_track_ids
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
@@ -116,12 +123,73 @@ def test_statistics_on_a_hand_made_flight() -> None:
     assert "| Radar raw (3D) | 3 |" in text and "| RF raw (2D) | 2 |" in text
 
 
+def _turned(
+    t: float, tid: int, p: tuple[float, float, float], daz: float, del_: float, prob: float = 0.9
+) -> RadarTrack:
+    """A report of the truth position ``p`` (radar at the origin) turned by ``daz`` degrees
+    clockwise and raised by ``del_`` degrees."""
+    e, n, u = p
+    r = math.dist(p, (0.0, 0.0, 0.0))
+    az = math.atan2(e, n) + math.radians(daz)
+    el = math.atan2(u, math.hypot(e, n)) + math.radians(del_)
+    return _track(t, tid, r * math.cos(el) * math.sin(az), r * math.cos(el) * math.cos(az),
+                  r * math.sin(el), prob)  # fmt: skip
+
+
+def _skewed_flight(name: str, daz: float, del_: float) -> Flight:
+    truth = _truth()  # truth at t: (t - 100, 10 (t - 100), 50)
+    frames = []
+    for i in range(10, 100, 2):
+        p = (float(i), 10.0 * i, 50.0)
+        tracks = [_turned(100.0 + i, 1, p, daz, del_)]
+        if i % 10 == 0:  # a report 150 m off truth (a merge): no angle error of the radar
+            tracks.append(_track(100.0 + i, 2, p[0] + 150.0, p[1], p[2], 0.9))
+        if i % 4 == 0:  # a bird track, far off the UAV's angles: never a UAV report
+            tracks.append(_turned(100.0 + i, 3, p, 20.0, 5.0, prob=0.1))
+        frames.append(RadarFrame(100.0 + i, tuple(tracks)))
+    frames.append(RadarFrame(100.5, (_turned(100.5, 1, (0.5, 5.0, 50.0), 40.0, 0.0),)))
+    return Flight(name, truth, frames, [])
+
+
+def test_radar_alignment_from_the_uav_reports_angles() -> None:
+    a = angle_residuals(_skewed_flight("a", 0.6, 0.3), (0.0, 0.0, 0.0))
+    # 45 UAV reports on the path; the ones 150 m off and the one 5 m from the radar
+    # horizontally (its azimuth means nothing) are left out, and so is the bird
+    assert a.az_deg.size == 45 and a.el_deg.size == 45
+    assert a.az_deg == pytest.approx(np.full(45, 0.6), abs=1e-9)
+    assert a.el_deg == pytest.approx(np.full(45, 0.3), abs=1e-9)
+    b = angle_residuals(_skewed_flight("b", -0.2, 0.1), (0.0, 0.0, 0.0))
+    one = radar_alignment([a])
+    assert one is not None and one.az_bias_deg == pytest.approx(0.6)
+    both = radar_alignment([a, b, angle_residuals(Flight("empty", _truth(), [], []), (0, 0, 0))])
+    assert both is not None and both.n_flights == 2 and both.n_reports == 90
+    assert both.az_flight_range_deg == pytest.approx((-0.2, 0.6))
+    assert both.el_flight_range_deg == pytest.approx((0.1, 0.3))
+    text = format_alignment(both)
+    assert "over 2 flights" in text and "azimuth -0.20 to +0.60" in text
+    assert radar_alignment([]) is None and "nothing to estimate" in format_alignment(None)
+
+
+def test_calibrate_command_pools_the_alignment_over_several_flights(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    folder = str(data_path(DEFAULT_FLIGHT))
+    assert cli_main(["calibrate", folder, folder]) == 0
+    out = capsys.readouterr().out
+    assert "| Radar raw (3D) |" not in out  # one line per flight, then the pooled estimate
+    lines = [ln for ln in out.splitlines() if ln.startswith(folder + ": Radar alignment")]
+    assert len(lines) == 2 and lines[0] == lines[1]
+    assert "over 2 flights" in out.splitlines()[-1]
+
+
 def test_calibrate_command_prints_the_tables(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli_main(["calibrate"]) == 0
     out = capsys.readouterr().out
     assert "| RF raw (2D) |" in out and "| Radar raw (3D) |" in out
     assert "| beyond 800 m |" in out and "| north (N >= split) |" in out
     assert "median truth north coordinate" in out
+    # the default flight's twin radar is mounted 0.5 deg off in azimuth (docs/twin.md)
+    assert "Radar alignment (median UAV report minus truth" in out
 
 
 def test_calibrate_command_rejects_a_missing_folder(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]

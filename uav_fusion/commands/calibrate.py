@@ -1,4 +1,5 @@
-"""``uav_fusion calibrate``: raw radar and RF errors of a flight against its truth."""
+"""``uav_fusion calibrate``: raw radar and RF errors of a flight against its truth, and the
+radar's mounting misalignment (of one flight, or pooled over several)."""
 
 from __future__ import annotations
 
@@ -6,19 +7,31 @@ import argparse
 import json
 from pathlib import Path
 
-from uav_fusion.core.calibration import calibrate, format_calibration
+from uav_fusion.core.calibration import (
+    angle_residuals,
+    calibrate,
+    format_alignment,
+    format_calibration,
+    radar_alignment,
+)
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin.writers import MANIFEST
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
-HELP = "print each sensor's raw ('before fusion') error statistics against truth"
+HELP = (
+    "print each sensor's raw ('before fusion') error statistics against truth, and the "
+    "radar's misalignment"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "folder", nargs="?", help="flight folder (default: the bundled default flight)"
+        "folder",
+        nargs="*",
+        help="flight folder (default: the bundled default flight); with several, one "
+        "alignment line per flight and the radar's misalignment pooled over them",
     )
     parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
     parser.add_argument(
@@ -60,14 +73,25 @@ def run(args: argparse.Namespace) -> int:
         args.uav_prob = 0.5 if thr is None else thr
     if not 0.0 <= args.uav_prob <= 1.0:
         raise ConfigError(f"--uav-prob must lie in [0, 1], got {args.uav_prob}")
-    folder = Path(args.folder) if args.folder else data_path(DEFAULT_FLIGHT)
+    folders = [Path(f) for f in args.folder] or [data_path(DEFAULT_FLIGHT)]
     site = load_site(args.site)
-    flight = load_flight(folder, site, rf_file=args.rf_file, strict=args.strict)
-    radar = radar_position(folder, site.radar.enu, args.site)
-    res = calibrate(flight, radar, site.radar.range_gate_m, args.uav_prob)
-    print(format_calibration(res))
-    for key in ("truth", "radar", "rf"):
-        rep = flight.reports.get(key)
-        if rep is not None and (rep.n_skipped or rep.notes):
-            print(f"Load {key}: {rep.summary()}")
+    residuals = []
+    for folder in folders:
+        flight = load_flight(folder, site, rf_file=args.rf_file, strict=args.strict)
+        radar = radar_position(folder, site.radar.enu, args.site)
+        res = angle_residuals(flight, radar, args.uav_prob)
+        residuals.append(res)
+        if len(folders) == 1:
+            cal = calibrate(flight, radar, site.radar.range_gate_m, args.uav_prob)
+            print(format_calibration(cal))
+            print()
+        else:
+            print(f"{folder}: {format_alignment(radar_alignment([res])).split('. A ')[0]}.")
+        for key in ("truth", "radar", "rf"):
+            rep = flight.reports.get(key)
+            if rep is not None and (rep.n_skipped or rep.notes):
+                print(f"Load {key}: {rep.summary()}")
+    if len(folders) > 1:
+        print()
+    print(format_alignment(radar_alignment(residuals)))
     return 0

@@ -184,6 +184,117 @@ def calibrate(
     )
 
 
+@dataclass(frozen=True)
+class AngleResiduals:
+    """Azimuth and elevation residuals (report minus truth, degrees) of a flight's UAV radar
+    reports, seen from the radar (see :func:`angle_residuals`)."""
+
+    flight: str
+    az_deg: FloatArray  # clockwise from north, wrapped to (-180, 180]
+    el_deg: FloatArray
+
+
+@dataclass(frozen=True)
+class RadarAlignment:
+    """The radar's mounting misalignment estimated against truth: the median azimuth and
+    elevation residual of the UAV's radar reports (``measurement.radar.az_bias_deg`` /
+    ``el_bias_deg`` of a tracker profile correct it)."""
+
+    az_bias_deg: float
+    el_bias_deg: float
+    n_reports: int
+    n_flights: int
+    # per-flight medians: smallest and largest (the spread between flights)
+    az_flight_range_deg: tuple[float, float]
+    el_flight_range_deg: tuple[float, float]
+
+
+def angle_residuals(
+    flight: Flight,
+    radar_enu: tuple[float, float, float],
+    uav_prob_threshold: float = 0.5,
+    max_error_m: float = 100.0,
+    min_horizontal_m: float = 50.0,
+    max_truth_gap_s: float = 2.0,
+) -> AngleResiduals:
+    """Angle residuals of the UAV's radar reports (the class rule of :func:`calibrate`).
+
+    Only reports within ``max_error_m`` of truth count (a UAV track that took a ghost's or a
+    clutter site's detection is not an angle error of the radar), and only where the truth
+    lies at least ``min_horizontal_m`` from the radar horizontally (the azimuth of a target
+    straight above the radar means nothing).
+    """
+    uav_ids, _ = radar_class.uav_track_ids(flight.radar, uav_prob_threshold)
+    rows = [
+        (tr.t, tr.e, tr.n, tr.u)
+        for fr in flight.radar
+        for tr in fr.tracks
+        if tr.track_id in uav_ids
+    ]
+    empty = np.zeros(0)
+    if not rows:
+        return AngleResiduals(flight.name, empty, empty)
+    a = np.asarray(rows, dtype=float)
+    tt, tenu = flight.truth_arrays()
+    order = np.argsort(tt, kind="stable")
+    ref = interpolate_truth(tt[order], tenu[order], a[:, 0], max_truth_gap_s)
+    z = a[:, 1:] - np.asarray(radar_enu, dtype=float)
+    x = ref - np.asarray(radar_enu, dtype=float)
+    with np.errstate(invalid="ignore"):
+        ok = (
+            np.all(np.isfinite(x), axis=1)
+            & (np.linalg.norm(z - x, axis=1) <= max_error_m)
+            & (np.hypot(x[:, 0], x[:, 1]) >= min_horizontal_m)
+        )
+    z, x = z[ok], x[ok]
+    daz = np.degrees(np.arctan2(z[:, 0], z[:, 1]) - np.arctan2(x[:, 0], x[:, 1]))
+    daz = (daz + 180.0) % 360.0 - 180.0
+    del_ = np.degrees(
+        np.arctan2(z[:, 2], np.hypot(z[:, 0], z[:, 1]))
+        - np.arctan2(x[:, 2], np.hypot(x[:, 0], x[:, 1]))
+    )
+    return AngleResiduals(flight.name, daz, del_)
+
+
+def radar_alignment(residuals: list[AngleResiduals]) -> RadarAlignment | None:
+    """The pooled median of one or more flights' angle residuals (None without any)."""
+    used = [r for r in residuals if r.az_deg.size]
+    if not used:
+        return None
+    az = np.concatenate([r.az_deg for r in used])
+    el = np.concatenate([r.el_deg for r in used])
+    maz = [float(np.median(r.az_deg)) for r in used]
+    mel = [float(np.median(r.el_deg)) for r in used]
+    return RadarAlignment(
+        float(np.median(az)),
+        float(np.median(el)),
+        int(az.size),
+        len(used),
+        (min(maz), max(maz)),
+        (min(mel), max(mel)),
+    )
+
+
+def format_alignment(al: RadarAlignment | None) -> str:
+    """One Markdown paragraph on the radar's misalignment."""
+    if al is None:
+        return "Radar alignment: no UAV report within 100 m of truth; nothing to estimate."
+    text = (
+        f"Radar alignment (median UAV report minus truth, {al.n_reports} reports within 100 m"
+        f" of truth): azimuth {al.az_bias_deg:+.2f} deg, elevation {al.el_bias_deg:+.2f} deg"
+    )
+    if al.n_flights > 1:
+        lo, hi = al.az_flight_range_deg
+        elo, ehi = al.el_flight_range_deg
+        text += (
+            f" over {al.n_flights} flights (per-flight medians: azimuth {lo:+.2f} to {hi:+.2f},"
+            f" elevation {elo:+.2f} to {ehi:+.2f} deg)"
+        )
+    return (
+        text + ". A tracker profile corrects it with measurement.radar.az_bias_deg / el_bias_deg."
+    )
+
+
 def _row(name: str, s: ErrorStats) -> str:
     def f(x: float) -> str:
         return "-" if not math.isfinite(x) else f"{x:.1f}"
