@@ -23,7 +23,9 @@ frame, or one RF fix):
   [T^2/2, T]]``; checked to 1e-12 by the tests);
 * radar reports as 3D position detections, each with its own ``LinearGaussian`` measurement
   model whose R is the profile's polar radar model at the report's position (the R our tracker
-  updates with); RF fixes as 2D (east, north) detections with R from the CEP model. Reports
+  updates with), after the profile's misalignment correction
+  (``measurement.radar.az_bias_deg`` / ``el_bias_deg``: the corrected reports ours takes);
+  RF fixes as 2D (east, north) detections with R from the CEP model. Reports
   beyond the range gate (the profile's ``far_gate_m`` when it has one: ours updates in 3D
   only out to ``range_gate_m`` and horizontally out to ``far_gate_m``, and this baseline has
   no horizontal-only mode; on the multi-UAV tune half, class filter 0.7, a 1000 m gate gave
@@ -113,7 +115,11 @@ from uav_fusion.core.estimator import Profile, load_profile
 from uav_fusion.core.estimator.components import packed_to_array
 from uav_fusion.core.estimator.multi import GridEpoch, MultiTracker, TrackOutput, run_multi
 from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.estimator.tracker import radar_model_from_profile, rf_model_from_profile
+from uav_fusion.core.estimator.tracker import (
+    alignment_from_profile,
+    radar_model_from_profile,
+    rf_model_from_profile,
+)
 from uav_fusion.core.metrics import interpolate_truth
 from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, pool, score_flight
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
@@ -217,6 +223,7 @@ class Baseline:
     def __post_init__(self) -> None:
         p = self.profile
         self.radar_r = radar_model_from_profile(p, self.site)
+        self.align = alignment_from_profile(p, self.site)
         self.rf_r = rf_model_from_profile(p)
         gate = p.range_gate_m if p.range_gate_m is not None else self.site.radar.range_gate_m
         if p.far_gate_m is not None:  # no horizontal-only mode here: 3D out to the far gate
@@ -233,7 +240,10 @@ class Baseline:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
 
     def radar_detections(self, frame: RadarFrame) -> set[Detection]:
-        """One detection per usable report of a frame (each with its own R)."""
+        """One detection per usable report of a frame (each with its own R), corrected for the
+        radar's misalignment as ours is."""
+        if self.align is not None:
+            frame = self.align.frame(frame)
         ts = to_datetime(frame.t)
         rx, ry, rz = self.radar_pos
         out: set[Detection] = set()

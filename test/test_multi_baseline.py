@@ -18,7 +18,11 @@ from uav_fusion.core.estimator.components import packed_to_array
 from uav_fusion.core.estimator.kalman import CvKalman
 from uav_fusion.core.estimator.models import cv_process_noise
 from uav_fusion.core.estimator.profile import Profile
-from uav_fusion.core.estimator.tracker import radar_model_from_profile, rf_model_from_profile
+from uav_fusion.core.estimator.tracker import (
+    alignment_from_profile,
+    radar_model_from_profile,
+    rf_model_from_profile,
+)
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 
@@ -85,8 +89,14 @@ def test_detections_carry_our_r_and_the_same_drops(
     )
     dets = b.radar_detections(RadarFrame(10.0, (mk(1, p, (1.0, 2.0, 0.0)), mk(2, far, None))))
     (d,) = dets  # beyond the gate: dropped
-    np.testing.assert_array_equal(np.asarray(d.state_vector).ravel(), p)
-    expected = packed_to_array(radar_model_from_profile(profile, site).r_at(*p))
+    # the report as ours takes it: corrected for the radar's misalignment
+    align = alignment_from_profile(profile, site)
+    assert align is not None
+    q = align.track(mk(1, p, (1.0, 2.0, 0.0)))
+    z = np.array([q.e, q.n, q.u])
+    assert 1.0 < float(np.linalg.norm(z - p)) < 10.0
+    np.testing.assert_array_equal(np.asarray(d.state_vector).ravel(), z)
+    expected = packed_to_array(radar_model_from_profile(profile, site).r_at(*z))
     np.testing.assert_allclose(np.asarray(d.measurement_model.covar()), expected, rtol=0, atol=0)
     H = np.asarray(d.measurement_model.matrix())[:, mb.SS_TO_OURS]
     np.testing.assert_array_equal(H, np.hstack([np.eye(3), np.zeros((3, 3))]))
