@@ -104,16 +104,16 @@ def test_radar_alignment_turns_a_report_back_to_the_true_angles(az: float) -> No
     got = al.track(_polar_report(radar, az + 0.5, 10.3, 1000.0))
     want = _polar_report(radar, az, 10.0, 1000.0)
     assert (got.e, got.n, got.u) == pytest.approx((want.e, want.n, want.u), abs=1e-9)
-    # the slant range is kept; the velocity is turned by the azimuth correction only
+    # the slant range is kept; the point alone gives the same position
     d = math.dist((got.e, got.n, got.u), radar)
     assert d == pytest.approx(1000.0, abs=1e-9)
-    assert got.vel_ned == pytest.approx(
-        (10.0 * math.cos(RAD(0.5)), -10.0 * math.sin(RAD(0.5)), -1.0)
-    )
-    # everything else is the radar's own report
+    raw = _polar_report(radar, az + 0.5, 10.3, 1000.0)
+    assert al.point(raw.e, raw.n, raw.u) == (got.e, got.n, got.u)
+    # everything else is the radar's own report, the velocity included
     assert (got.t, got.track_id, got.lat, got.lon, got.h, got.uav_prob, got.rcs_dbsm) == (
         1.0, 7, 35.7, -78.7, 123.0, 0.8, -10.0
     )  # fmt: skip
+    assert got.vel_ned == (10.0, 0.0, -1.0)
 
 
 def test_radar_alignment_of_a_frame_and_without_a_bias() -> None:

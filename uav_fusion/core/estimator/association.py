@@ -209,8 +209,14 @@ class ObjectTable:
         self.objects: dict[int, RadarObject] = {}
         self._orphans: list[tuple[float, float, float, float]] = []
 
-    def update(self, trk: RadarTrack, r: PackedR | None = None) -> RadarObject:
-        """Fold one report (with its R, computed here when not given) into its object
+    def update(
+        self,
+        trk: RadarTrack,
+        r: PackedR | None = None,
+        z: tuple[float, float, float] | None = None,
+    ) -> RadarObject:
+        """Fold one report (with its R, computed here when not given; at the position ``z``
+        when given: the report corrected for the radar's misalignment) into its object
         (created on first sight)."""
         cfg = self.cfg
         tid = trk.track_id
@@ -219,9 +225,12 @@ class ObjectTable:
         if obj is None:
             obj = self.objects[tid] = RadarObject(tid, t)
         dt = t - obj.last_t
-        e = trk.e
-        n = trk.n
-        u = trk.u
+        if z is None:
+            e = trk.e
+            n = trk.n
+            u = trk.u
+        else:
+            e, n, u = z
         if r is None:
             r = self.radar_r.r_at(e, n, u)
         if obj.kf is None and self._orphans:

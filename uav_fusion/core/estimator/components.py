@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -142,45 +142,54 @@ class RadarAlignment:
     it) and lowered by ``el_bias_deg`` in elevation, at its own range.
 
     The biases are what :func:`uav_fusion.core.calibration.radar_alignment` measures against
-    RTK truth (median report-minus-truth azimuth and elevation). The report's NED velocity
-    is turned by the azimuth correction only (an elevation offset is not a rotation of the
-    frame). Only ``e``, ``n``, ``u`` and ``vel_ned`` change: the geodetic fields keep the
-    radar's own report.
+    RTK truth (median report-minus-truth azimuth and elevation). Only the position changes:
+    the velocity is left as reported (a turn of half a degree moves a 15 m/s velocity by
+    0.13 m/s, far inside its noise) and the geodetic fields keep the radar's own report. The
+    trackers correct each report's position on the fly (:meth:`point`, no new report
+    object); :meth:`track` and :meth:`frame` give the corrected reports themselves.
     """
 
     radar_enu: tuple[float, float, float]
     az_bias_deg: float
     el_bias_deg: float
+    # (cos, sin) of the azimuth and of the elevation correction: read once per report
+    _trig: tuple[float, float, float, float] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        a = math.radians(self.az_bias_deg)
+        b = math.radians(self.el_bias_deg)
+        object.__setattr__(self, "_trig", (math.cos(a), math.sin(a), math.cos(b), math.sin(b)))
 
     @property
     def active(self) -> bool:
         return bool(self.az_bias_deg or self.el_bias_deg)
 
-    def track(self, trk: RadarTrack) -> RadarTrack:
-        """One report, corrected."""
+    def point(self, e: float, n: float, u: float) -> tuple[float, float, float]:
+        """A reported ENU position, corrected."""
         e0, n0, u0 = self.radar_enu
-        de, dn, du = trk.e - e0, trk.n - n0, trk.u - u0
-        rho = math.hypot(de, dn)
-        r = math.hypot(rho, du)
-        b = math.radians(self.az_bias_deg)
-        cb, sb = math.cos(b), math.sin(b)
-        # elevation lowered by el_bias at the same slant range
-        el = math.atan2(du, rho) - math.radians(self.el_bias_deg)
-        rho2 = r * math.cos(el)
-        k = rho2 / rho if rho > 1e-9 else 0.0
-        de2 = (de * cb - dn * sb) * k
-        dn2 = (dn * cb + de * sb) * k
-        vel = trk.vel_ned
-        if vel is not None:
-            vn, ve, vd = vel
-            vel = (vn * cb + ve * sb, ve * cb - vn * sb, vd)
-        return replace(trk, e=e0 + de2, n=n0 + dn2, u=u0 + r * math.sin(el), vel_ned=vel)
+        ca, sa, cb, sb = self._trig
+        de = e - e0
+        dn = n - n0
+        du = u - u0
+        rho = math.sqrt(de * de + dn * dn)
+        # the elevation lowered by el_bias at the same slant range: (rho, du) turned down
+        k = (rho * cb + du * sb) / rho if rho > 1e-9 else 0.0
+        return e0 + (de * ca - dn * sa) * k, n0 + (dn * ca + de * sa) * k, u0 + du * cb - rho * sb
+
+    def track(self, trk: RadarTrack) -> RadarTrack:
+        """One report, corrected (what the trackers see of it)."""
+        e, n, u = self.point(trk.e, trk.n, trk.u)
+        return RadarTrack(
+            trk.t, trk.track_id, trk.lat, trk.lon, trk.h, e, n, u, trk.vel_ned, trk.uav_prob,
+            trk.range_m, trk.rcs_dbsm, trk.radial_velocity, trk.num_inliers, trk.line,
+        )  # fmt: skip
 
     def frame(self, frame: RadarFrame) -> RadarFrame:
         """Every report of a frame, corrected (the frame itself when there is nothing to do)."""
         if not frame.tracks or not self.active:
             return frame
-        return replace(frame, tracks=tuple(self.track(t) for t in frame.tracks))
+        one = self.track
+        return RadarFrame(frame.t, tuple([one(t) for t in frame.tracks]), frame.line)
 
 
 @dataclass(frozen=True)

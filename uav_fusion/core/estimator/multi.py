@@ -295,8 +295,6 @@ class MultiTracker:
 
     # --- radar ------------------------------------------------------------------------------
     def process_radar_frame(self, frame: RadarFrame) -> None:
-        if self._align is not None:
-            frame = self._align.frame(frame)
         t = frame.t
         cfg = self.cfg
         dv = self._extra_var
@@ -312,27 +310,32 @@ class MultiTracker:
         far2 = self._far2
         skip_coasts = cfg.skip_radar_coasts
         isfinite = math.isfinite
+        align = self._align.point if self._align is not None else None
         for trk in frame.tracks:
-            if not isfinite(trk.t + trk.e + trk.n + trk.u):
+            e, n_, u = trk.e, trk.n, trk.u
+            if not isfinite(trk.t + e + n_ + u):
                 self._count("rejected_invalid")
                 continue
-            ro = r_at(trk.e, trk.n, trk.u)
-            obj = update_object(trk, ro)
+            if align is not None:  # the radar's misalignment
+                e, n_, u = align(e, n_, u)
+            ro = r_at(e, n_, u)
+            p3 = (e, n_, u)
+            obj = update_object(trk, ro, p3)
+            z: tuple[float, ...] = p3
             r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
-            d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
+            d2 = (e - rx) ** 2 + (n_ - ry) ** 2 + (u - rz) ** 2
             if (d2 > gate2 and not d2 <= far2) or (skip_coasts and obj.coasting):
                 continue
             s = obj.score(cfg)
-            z: tuple[float, ...] = (trk.e, trk.n, trk.u)
             if d2 > gate2:
                 # inside the far gate: horizontal only
-                z, r = (trk.e, trk.n), (r[0], r[1], r[3])
-            elif flat and trk.u < -cfg.below_ground_m:
+                z, r = (e, n_), (r[0], r[1], r[3])
+            elif flat and u < -cfg.below_ground_m:
                 # the elevation of a low target is the radar's weak point (ground multipath):
                 # range and azimuth still place it; its object without the below-ground term
                 if obj.below_ground(cfg):
                     s += cfg.below_ground_weight
-                z, r = (trk.e, trk.n), (r[0], r[1], r[3])
+                z, r = (e, n_), (r[0], r[1], r[3])
             if s >= cfg.follow_min:
                 if d2 > gate2:
                     far_cands.add(len(cands))

@@ -440,8 +440,6 @@ class Tracker:
     def process_radar_frame(self, frame: RadarFrame) -> list[TrackerStep]:
         """One radar frame; returns one step per report, in the frame's order (a report's
         step carries it as corrected for the radar's misalignment, when the profile sets one)."""
-        if self._align is not None:
-            frame = self._align.frame(frame)
         t = frame.t
         c = self.counters
         tracks = frame.tracks
@@ -455,19 +453,24 @@ class Tracker:
         update = self.objects.update
         dv = self._extra_var
         isfinite = math.isfinite
+        # each report's position, corrected for the radar's misalignment (report index -> z)
+        zs: dict[int, tuple[float, float, float]] = {}
+        align = self._align.point if self._align is not None else None
         for i, trk in enumerate(tracks):
             e, n_, u = trk.e, trk.n, trk.u
             if not isfinite(trk.t + e + n_ + u):
                 z = (e, n_, u)
                 out[i] = self._step(t, RADAR, DISCARDED, "invalid", None, z, trk.track_id)
                 continue
+            if align is not None:
+                e, n_, u = align(e, n_, u)
+            p3 = zs[i] = (e, n_, u)
             ro = r_at(e, n_, u)
             r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
-            objs.append((i, trk, update(trk, ro), r))
+            objs.append((i, trk, update(trk, ro, p3), r))
         if not self._advance(t):
             for i, trk, _, _ in objs:
-                z = (trk.e, trk.n, trk.u)
-                out[i] = self._step(t, RADAR, DISCARDED, "out_of_order", None, z, trk.track_id)
+                out[i] = self._step(t, RADAR, DISCARDED, "out_of_order", None, zs[i], trk.track_id)
             return [s for s in out if s is not None]
         cands: list[tuple[int, RadarTrack, RadarObject, float]] = []
         rs: dict[int, PackedR] = {}
@@ -479,7 +482,8 @@ class Tracker:
         far: set[int] = set()  # reports beyond the range gate, kept as 2D candidates
         for i, trk, obj, r in objs:
             rs[i] = r
-            d2 = (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2
+            e, n_, u = zs[i]
+            d2 = (e - rx) ** 2 + (n_ - ry) ** 2 + (u - rz) ** 2
             if d2 > gate2:
                 if d2 <= far2 and not (obj.coasting and skip_coasts):
                     # inside the far gate: a horizontal-only candidate (R's horizontal
@@ -488,15 +492,13 @@ class Tracker:
                     rs[i] = (r[0], r[1], r[3])
                     cands.append((i, trk, obj, obj.score(cfg)))
                     continue
-                z = (trk.e, trk.n, trk.u)
-                out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, z, trk.track_id)
+                out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, zs[i], trk.track_id)
             elif obj.coasting and skip_coasts:
-                z = (trk.e, trk.n, trk.u)
-                out[i] = self._step(t, RADAR, DISCARDED, "coast", None, z, trk.track_id)
+                out[i] = self._step(t, RADAR, DISCARDED, "coast", None, zs[i], trk.track_id)
             else:
                 cands.append((i, trk, obj, obj.score(cfg)))
         if cands:
-            for i, step in self._radar_candidates(t, cands, rs, far):
+            for i, step in self._radar_candidates(t, cands, rs, far, zs):
                 out[i] = step
         return [s for s in out if s is not None]
 
@@ -506,6 +508,7 @@ class Tracker:
         cands: list[tuple[int, RadarTrack, RadarObject, float]],
         rs: dict[int, PackedR],
         far: set[int],
+        zs: dict[int, tuple[float, float, float]],
     ) -> list[tuple[int, TrackerStep]]:
         cfg = self.cfg
         res: list[tuple[int, TrackerStep]] = []
@@ -522,11 +525,11 @@ class Tracker:
                 r = rs[i]
                 z: tuple[float, ...]
                 if far and i in far:
-                    z = (trk.e, trk.n)
+                    z = zs[i][:2]
                     nis = f.nis(z, r)
                     inside = nis <= g2
                 else:
-                    z = (trk.e, trk.n, trk.u)
+                    z = zs[i]
                     nis = nis3(z[0], z[1], z[2], r) if nis3 is not None else f.nis(z, r)
                     inside = nis <= g
                 if mark is not None:
@@ -550,12 +553,12 @@ class Tracker:
                         if e is not best:
                             res.append((e[0], self._discard_report(t, e, "not_selected")))
                     return res
-                return self._initiate(t, cands, far)
+                return self._initiate(t, cands, far, zs)
             if cfg.challenge_s > 0 and self._challenged(t, scored):
                 # the followed object has been outscored by a strong object outside the
                 # gate for challenge_s: the radar's track has most likely left the UAV
                 self._drop("challenged")
-                return self._initiate(t, cands, far)
+                return self._initiate(t, cands, far, zs)
             eligible = [e for e in scored if e[3] >= cfg.follow_min]
             in_gate = [e for e in eligible if e[7]]
             if in_gate:
@@ -583,7 +586,7 @@ class Tracker:
                     # disagreed included) may start the next one at once
                     self._count("rejected_nis")
                     self._drop("max_rejections")
-                    return self._initiate(t, cands, far)
+                    return self._initiate(t, cands, far, zs)
                 res.append((i, self._rejected(t, RADAR, nis, z, trk.track_id, s)))
                 for e in scored:
                     if e is best:
@@ -596,7 +599,7 @@ class Tracker:
                 res.append((e[0], self._discard_report(t, e, why)))
             return res
         # no confirmed track (none, or a tentative RF track): a strong object starts one
-        return self._initiate(t, cands, far)
+        return self._initiate(t, cands, far, zs)
 
     def _take_radar(self, t: float, f: MotionFilter, e: _Scored, w: float) -> TrackerStep:
         """Update the track with candidate ``e`` (R / ``w``; a horizontal-only candidate holds
@@ -649,6 +652,7 @@ class Tracker:
         t: float,
         cands: list[tuple[int, RadarTrack, RadarObject, float]],
         far: set[int],
+        zs: dict[int, tuple[float, float, float]],
     ) -> list[tuple[int, TrackerStep]]:
         cfg = self.cfg
         ok = [
@@ -672,16 +676,16 @@ class Tracker:
             self.last_3d_t = None if flat else t
             status, reason = self._confirmed_status()
             self._count(f"{status}_{RADAR}")
-            z = (trk.e, trk.n, trk.u)
-            res.append((i, self._step(t, RADAR, status, reason, None, z, trk.track_id, s)))
+            res.append((i, self._step(t, RADAR, status, reason, None, zs[i], trk.track_id, s)))
         for e in cands:
             if e is best and res:
                 continue
             why = "no_track" if self.filter is None or not self.confirmed else "not_selected"
             if self.filter is not None and not self.confirmed:
                 why = "tentative_track"
-            z = (e[1].e, e[1].n, e[1].u)
-            res.append((e[0], self._step(t, RADAR, DISCARDED, why, None, z, e[1].track_id, e[3])))
+            res.append(
+                (e[0], self._step(t, RADAR, DISCARDED, why, None, zs[e[0]], e[1].track_id, e[3]))
+            )
         return res
 
     def _used(
