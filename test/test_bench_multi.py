@@ -198,6 +198,16 @@ def test_the_task_scores_the_flight_as_run_multi_and_score_flight_do(
     assert pooled.false_track_pct == pytest.approx(100.0 * sc.false_track_s / ref.epochs)
     assert pooled.worst_uav_coverage_pct == pytest.approx(min(u.coverage_pct for u in sc.uavs))
     assert math.isfinite(pooled.silent_observable_coverage_pct)
+    # GOSPA's parts: the assigned pairs alone, and the shares of the summed squares
+    assert pooled.gospa_localisation_m == pytest.approx(float(np.mean(np.sqrt(ref.localisation))))
+    assert pooled.gospa_localisation_m <= pooled.gospa_mean_m
+    total = float(np.sum(ref.distance**2))
+    assert pooled.gospa_missed_share_pct == pytest.approx(100.0 * float(np.sum(ref.missed)) / total)
+    assert pooled.gospa_false_share_pct == pytest.approx(100.0 * float(np.sum(ref.false)) / total)
+    loc_share = 100.0 * float(np.sum(ref.localisation)) / total
+    assert loc_share + pooled.gospa_missed_share_pct + pooled.gospa_false_share_pct == (
+        pytest.approx(100.0)
+    )
 
 
 def test_the_bench_command_runs_the_multi_part(small: tuple[Path, Path], tmp_path: Path) -> None:

@@ -291,6 +291,7 @@ class FlightSamples:
     uavs: tuple[UavSamples, ...]
     assignments: tuple[EpochAssignment, ...]
     excused_estimates: int = 0  # estimates excused on a UAV not airborne, over the epochs
+    p: float = 2.0  # the GOSPA exponent (the parts are p-th powers of metres)
 
     @property
     def epochs(self) -> int:
@@ -579,6 +580,7 @@ def score_flight(
         uavs=uavs,
         assignments=tuple(assignments),
         excused_estimates=n_excused,
+        p=s.gospa.p,
     )
 
 
