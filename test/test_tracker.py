@@ -174,11 +174,18 @@ class Scene:
         return self.r0 + np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 50.0])
 
     def report(
-        self, t: float, tid: int, p: np.ndarray, prob: float, vel: np.ndarray, sd: float = 5.0
+        self,
+        t: float,
+        tid: int,
+        p: np.ndarray,
+        prob: float,
+        vel: np.ndarray,
+        sd: float = 5.0,
+        rcs_dbsm: float = -10.0,
     ) -> RadarTrack:
         z = p + self.rng.normal(0.0, sd, 3)
         v = (float(vel[1]), float(vel[0]), float(-vel[2]))  # NED
-        rcs = round(-10.0 + float(self.rng.normal(0.0, 2.0)), 3)  # fluctuates look to look
+        rcs = round(rcs_dbsm + float(self.rng.normal(0.0, 2.0)), 3)  # fluctuates look to look
         return RadarTrack(t, tid, 0.0, 0.0, 0.0, *map(float, z), v, prob, None, rcs)
 
     def build(
@@ -271,10 +278,12 @@ def _ghost(sc: Scene, t: float, k: int) -> RadarTrack:
 
 
 def _vehicle(sc: Scene, t: float, k: int) -> RadarTrack:
-    """A car on a straight road at 12 m/s, 1 m above the ground, classed UAV at times."""
+    """A car on a straight road at 12 m/s, 1 m above the ground, classed UAV at times (with a
+    car's RCS, 8 m^2: a small target moving low is not taken for a car)."""
     p = sc.r0 + np.array([-600.0 + 12.0 * (t % 100.0), 300.0, 0.0])
     p[2] = 1.0
-    return sc.report(t, DECOY_ID, p, 0.65 if (k // 30) % 2 else 0.35, np.array([12.0, 0, 0]))
+    prob = 0.65 if (k // 30) % 2 else 0.35
+    return sc.report(t, DECOY_ID, p, prob, np.array([12.0, 0, 0]), rcs_dbsm=9.0)
 
 
 def _birds(sc: Scene, t: float, k: int) -> RadarTrack:
@@ -715,6 +724,32 @@ def test_an_object_once_clearly_in_the_air_is_never_a_ground_vehicle(
     assert obj.up < cfg.ground_alt_m  # low now, in every case
     vehicle = vehicle_with_release if release else True
     assert obj.aloft is not vehicle
+    no_ground = dataclasses.replace(cfg, ground_weight=0.0)
+    assert obj.score(cfg) == pytest.approx(obj.score(no_ground) - (3.0 if vehicle else 0.0))
+
+
+@pytest.mark.parametrize(
+    ("rcs_dbsm", "min_rcs", "vehicle"),
+    [
+        (-12.0, -100.0, True),  # off (the default): every low moving object
+        (-12.0, 0.0, False),  # a small target moving low: a UAV far out or taking off
+        (9.0, 0.0, True),  # a car-sized one
+        (None, 0.0, True),  # no RCS reported: counted as large, the term stays
+    ],
+)
+def test_a_low_moving_object_is_a_ground_vehicle_only_if_it_is_large(
+    rcs_dbsm: float | None, min_rcs: float, vehicle: bool
+) -> None:
+    cfg = dataclasses.replace(ScoreConfig(), vehicle_min_rcs_dbsm=min_rcs)
+    table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 20.0**2)))
+    rng = np.random.default_rng(3)
+    for k in range(40):  # 10 s at 13 m/s, 1 m up
+        rcs = None if rcs_dbsm is None else rcs_dbsm + float(rng.normal(0.0, 3.0))
+        obj = table.update(
+            RadarTrack(10.0 + 0.25 * k, 1, 0.0, 0.0, 0.0, 600.0 + 3.25 * k, 300.0, 1.0,
+                       (0.0, 13.0, 0.0), 0.3, None, rcs)
+        )  # fmt: skip
+    assert obj.up < cfg.ground_alt_m and not obj.aloft
     no_ground = dataclasses.replace(cfg, ground_weight=0.0)
     assert obj.score(cfg) == pytest.approx(obj.score(no_ground) - (3.0 if vehicle else 0.0))
 

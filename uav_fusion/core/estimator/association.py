@@ -14,7 +14,10 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   below the ground), is a multipath ghost (``-below_ground_weight``); one older than
   ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is
   clutter (``-stationary_weight``); one that moves but stays below ``ground_alt_m`` is a
-  ground vehicle (``-ground_weight``), unless its mean height has once stood more than
+  ground vehicle (``-ground_weight``) if its mean RCS is at least ``vehicle_min_rcs_dbsm``
+  (a car is a large radar target; a small UAV taking off, or flying low far out where its
+  reports scatter around the ground, is not; the default -100 dBsm takes every object, and
+  one without RCS reports counts as large), unless its mean height has once stood more than
   ``ground_release_sigmas`` (0: off) times its reports' mean vertical standard deviation
   above ``ground_alt_m`` (:attr:`RadarObject.aloft`: a car never climbs, while a UAV flying
   low far out has reports that scatter around the ground after it was seen in the air); one
@@ -70,6 +73,7 @@ class ScoreConfig:
     ground_alt_m: float = 4.0
     ground_weight: float = 3.0
     ground_release_sigmas: float = 0.0
+    vehicle_min_rcs_dbsm: float = -100.0  # -100: every low moving object may be a vehicle
     below_ground_m: float = 5.0
     below_ground_weight: float = 8.0
     below_ground_sigmas: float = 0.0
@@ -181,7 +185,12 @@ class RadarObject:
             s -= cfg.below_ground_weight
         elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
             s -= cfg.stationary_weight
-        elif self.up < cfg.ground_alt_m and self.n_reports > 1 and not self.aloft:
+        elif (
+            self.up < cfg.ground_alt_m
+            and self.n_reports > 1
+            and not self.aloft
+            and self.rcs_mean >= cfg.vehicle_min_rcs_dbsm
+        ):
             s -= cfg.ground_weight
         if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
             s -= cfg.erratic_weight

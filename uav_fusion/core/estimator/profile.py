@@ -413,7 +413,13 @@ def _validate_tracker(p: Profile, where: str) -> None:
     sc = p.score
     for key in score_keys():
         v = getattr(sc, key)
-        if key in ("follow_min", "init_min", "bird_rcs_dbsm", "skip_radar_coasts"):
+        if key in (
+            "follow_min",
+            "init_min",
+            "bird_rcs_dbsm",
+            "vehicle_min_rcs_dbsm",
+            "skip_radar_coasts",
+        ):
             continue
         if not v >= 0:
             raise ConfigError(f"{where}: association.{key} must be >= 0, got {v}")
