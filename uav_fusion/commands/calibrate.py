@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
             print(format_calibration(cal))
             print()
         else:
-            print(f"{folder}: {format_alignment(radar_alignment([res])).split('. A ')[0]}.")
+            print(f"{folder}: {format_alignment(radar_alignment([res]), hint=False)}")
         for key in ("truth", "radar", "rf"):
             rep = flight.reports.get(key)
             if rep is not None and (rep.n_skipped or rep.notes):

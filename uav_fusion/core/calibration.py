@@ -275,8 +275,9 @@ def radar_alignment(residuals: list[AngleResiduals]) -> RadarAlignment | None:
     )
 
 
-def format_alignment(al: RadarAlignment | None) -> str:
-    """One Markdown paragraph on the radar's misalignment."""
+def format_alignment(al: RadarAlignment | None, hint: bool = True) -> str:
+    """One Markdown paragraph on the radar's misalignment (``hint``: and how a profile
+    corrects it)."""
     if al is None:
         return "Radar alignment: no UAV report within 100 m of truth; nothing to estimate."
     text = (
@@ -290,6 +291,8 @@ def format_alignment(al: RadarAlignment | None) -> str:
             f" over {al.n_flights} flights (per-flight medians: azimuth {lo:+.2f} to {hi:+.2f},"
             f" elevation {elo:+.2f} to {ehi:+.2f} deg)"
         )
+    if not hint:
+        return text + "."
     return (
         text + ". A tracker profile corrects it with measurement.radar.az_bias_deg / el_bias_deg."
     )
