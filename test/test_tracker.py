@@ -308,6 +308,64 @@ def test_decoys_classed_uav_at_times_are_never_followed(
     assert published and max(sc.error(s) for s in published[20:]) < 40.0
 
 
+class PadScene(Scene):
+    """The UAV waits 30 s on its pad (RF on, radar blind to it: no Doppler) before its loop."""
+
+    def uav(self, t: float) -> np.ndarray:
+        return super().uav(max(0.0, t - 30.0))
+
+
+def test_a_large_reflector_beside_the_uav_on_its_pad_is_not_taken_for_it(site: Site) -> None:
+    # a reflector 30 m from the pad, moving a little (2 m/s: not stationary), classed 0.5,
+    # with a 4 dBsm RCS: the nearest radar object to the emitter while the UAV waits
+    refl_id = 444
+
+    def reflector(sc: Scene, t: float, k: int) -> RadarTrack:
+        a = 0.7 * t
+        c = sc.uav(0.0) + np.array([0.0, 30.0, -5.0])
+        p = c + 3.0 * np.array([math.cos(a), math.sin(a), 0.0])
+        v = 2.1 * np.array([-math.sin(a), math.cos(a), 0.0])
+        return sc.report(t, refl_id, p, 0.5, v, sd=2.0, rcs_dbsm=4.0)
+
+    def scene() -> PadScene:
+        sc = PadScene(site, seed=12)
+        sc.build(150.0, uav_visible=lambda t: t >= 30.0, decoy=reflector)
+        return sc
+
+    sc = scene()
+    tracker, steps = _run(sc, site)
+    obj = tracker.objects.objects[refl_id]
+    assert obj.rcs_seen and obj.rcs_mean > 0.0
+    assert not any(s.track_id == refl_id and (s.updated or s.coasted or s.counted) for s in steps)
+    late = [s for s in steps if s.counted and s.t > 45.0]
+    assert late and max(sc.error(s) for s in late) < 40.0
+    # without the RCS term the emitter's support starts the track on the reflector
+    prof = load_profile("tracker")
+    off = dataclasses.replace(prof, score=dataclasses.replace(prof.score, large_rcs_dbsm=100.0))
+    steps0 = run_tracker(Tracker(off, site), scene().stream())
+    assert any(s.track_id == refl_id and s.counted for s in steps0)
+
+
+def test_the_large_rcs_term_needs_an_rcs(site: Site) -> None:
+    cfg = ScoreConfig(large_rcs_dbsm=0.0, large_rcs_weight=5.0, age_weight=0.0)
+    table = ObjectTable(cfg, FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
+    r0 = np.array(site.radar.enu, dtype=float)
+
+    def feed(tid: int, rcs: float | None) -> float:
+        for k in range(20):
+            p = r0 + np.array([300.0 + 2.0 * 0.25 * k, 0.0, 40.0])
+            e, n, u = map(float, p)
+            trk = RadarTrack(k * 0.25, tid, 0.0, 0.0, 0.0, e, n, u, (0.0, 2.0, 0.0), 0.5, None, rcs)
+            obj = table.update(trk)
+        return obj.score(cfg)
+
+    assert feed(1, 4.0) == pytest.approx(-5.0)  # class logit 0, moving, aloft: only the term
+    assert feed(2, -10.0) == pytest.approx(0.0)
+    assert feed(3, None) == pytest.approx(0.0)  # no RCS reports: nothing known
+    assert feed(4, float("nan")) == pytest.approx(0.0)
+    assert not table.objects[4].rcs_seen
+
+
 def test_a_low_class_probability_uav_with_rf_agreement_is_kept(site: Site) -> None:
     sc = Scene(site, seed=2)
     sc.build(200.0, uav_prob=lambda t: 0.3, clutter=True)
@@ -359,11 +417,55 @@ def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
     assert later and max(sc.error(s) for s in later) < 40.0
 
 
-def _swap_scene(site: Site, swap_t: float = 120.0, duration_s: float = 200.0) -> Scene:
+def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site: Site) -> None:
+    # the UAV is lost to both sensors for 16 s; 10 s in, a bird-like object (classed 0.3,
+    # small, smooth) appears 150 m from where the track predicts it, well inside the grown
+    # gate; the UAV comes back under a new radar id at 116 s
+    gap = (100.0, 116.0)
+    bird_id = 555
+    t_bird = 110.0
+
+    def seen(t: float) -> bool:
+        return not gap[0] <= t < gap[1]
+
+    def bird(sc: Scene, t: float, k: int) -> RadarTrack | None:
+        if t < t_bird:
+            return None
+        p = sc.uav(t_bird) + np.array([150.0, 0.0, 0.0]) + np.array([0.0, 8.0, 0.0]) * (t - t_bird)
+        return sc.report(t, bird_id, p, 0.3, np.array([0.0, 8.0, 0.0]), rcs_dbsm=-24.0)
+
+    def stream() -> Scene:
+        sc = Scene(site, seed=6)
+        sc.build(200.0, uav_visible=seen, rf_ok=seen, fragment_s=116.0, decoy=bird)
+        return sc
+
+    sc = stream()
+    tracker, steps = _run(sc, site)
+    assert tracker.cfg.lost_sigma_m > 0
+    assert not any(s.track_id == bird_id and (s.updated or s.coasted) for s in steps)
+    back = [s for s in steps if s.updated and s.source == "radar" and s.t >= gap[1]]
+    assert back and back[0].t < gap[1] + 1.0 and back[0].track_id != bird_id
+    late = [s for s in steps if s.counted and s.t > gap[1] + 5.0]
+    assert late and max(sc.error(s) for s in late) < 40.0
+    # without the rule the object's first report inside the wide gate counts as agreement
+    # with the track, which is enough to follow it (the track jumps 150 m and stays there)
+    prof = load_profile("tracker")
+    off = dataclasses.replace(prof, score=dataclasses.replace(prof.score, lost_sigma_m=0.0))
+    steps0 = run_tracker(Tracker(off, site), stream().stream())
+    taken = [s for s in steps0 if s.updated and s.track_id == bird_id]
+    assert taken and taken[0].t < t_bird + 1.0
+
+
+def _swap_scene(
+    site: Site, swap_t: float = 120.0, duration_s: float = 200.0, new_coasts: bool = False
+) -> Scene:
     """The radar's track on the UAV (id 10) swaps at ``swap_t`` onto another object that flies
     off at 12 m/s while its class probability decays; the UAV gets a new track id (11) a
-    second later whose class probability climbs from the new-track prior; RF fixes go on."""
+    second later whose class probability climbs from the new-track prior; RF fixes go on.
+    With ``new_coasts`` every other report of id 11 is a radar coast (the previous report's
+    velocity and RCS repeated)."""
     sc = Scene(site, seed=11)
+    last11: RadarTrack | None = None
     p_swap = sc.uav(swap_t)
     away = (p_swap - sc.r0) * np.array([1.0, 1.0, 0.0])
     away /= np.linalg.norm(away)
@@ -381,7 +483,11 @@ def _swap_scene(site: Site, swap_t: float = 120.0, duration_s: float = 200.0) ->
             tracks.append(sc.report(t, 10, q, prob, 12.0 * away))
             if t >= swap_t + 1.0:
                 prob = min(0.85, 0.3 + 0.07 * (t - swap_t - 1.0))
-                tracks.append(sc.report(t, 11, p, prob, vel))
+                r11 = sc.report(t, 11, p, prob, vel)
+                if new_coasts and k % 2 and last11 is not None:
+                    r11 = dataclasses.replace(r11, vel_ned=last11.vel_ned, rcs_dbsm=last11.rcs_dbsm)
+                tracks.append(r11)
+                last11 = r11
         sc.frames.append(RadarFrame(t, tuple(tracks)))
         if k % 16 == 8:
             e, nn = p[:2] + sc.rng.normal(0.0, 8.0, 2)
@@ -409,6 +515,29 @@ def test_a_radar_track_that_swaps_off_the_uav_is_left_for_the_uavs_new_track(
     steps0 = run_tracker(Tracker(off, site), sc.stream())
     at = [s for s in steps0 if s.counted and swap_t + 20.0 <= s.t < swap_t + 21.0]
     assert at and min(sc.error(s) for s in at) > 100.0
+
+
+def test_a_challenger_whose_radar_track_coasts_every_other_frame_still_takes_over(
+    site: Site,
+) -> None:
+    # the coasted reports are not candidates; they must not restart the challenger's clock
+    swap_t = 120.0
+    sc = _swap_scene(site, swap_t, new_coasts=True)
+    coasts = [
+        (a, b)
+        for a, b in zip(sc.frames, sc.frames[1:], strict=False)
+        if len(a.tracks) == len(b.tracks) == 2
+        and b.tracks[1].rcs_dbsm == a.tracks[1].rcs_dbsm
+    ]
+    assert len(coasts) > 100
+    tracker, steps = _run(sc, site)
+    assert tracker.counters.get("rejected_coast", 0) > 100
+    assert tracker.counters.get("reinit_challenged", 0) == 1
+    after = [s for s in steps if s.updated and s.source == "radar" and s.t >= swap_t]
+    first_new = min(s.t for s in after if s.track_id == 11)
+    assert first_new < swap_t + 20.0
+    late = [s for s in steps if s.counted and s.t > first_new + 2.0]
+    assert late and max(sc.error(s) for s in late) < 40.0
 
 
 @pytest.mark.parametrize(

@@ -24,6 +24,9 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
   ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
   bird (``-erratic_weight``);
+* size: an object whose mean RCS (moving average of its reports' dBsm) is at least
+  ``large_rcs_dbsm`` is too large for a small UAV (``-large_rcs_weight``; a reflector, a
+  car); one without RCS reports is not judged;
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
   horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
   capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
@@ -38,7 +41,10 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   if it had been credited when each was made (decayed since);
 * agreement with the fused track: moving average of "this object's report had an NIS of at
   most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
-  the track's R allows for correlated errors), times ``fused_weight``;
+  the track's R allows for correlated errors), times ``fused_weight``; nothing is recorded
+  while the track's horizontal position standard deviation exceeds ``lost_sigma_m`` (0: no
+  limit; after a long coast the gate spans far more than the UAV's neighbourhood, and a
+  first report inside it would count as full agreement: ``Tracker``);
 * age: ``age_weight * min(1, age / age_full_s)`` (a track that persists is more likely real).
 
 A *coasted* report is one whose velocity and RCS repeat the same radar track's previous report
@@ -80,6 +86,8 @@ class ScoreConfig:
     erratic_nis: float = 6.0
     bird_rcs_dbsm: float = -15.0
     erratic_weight: float = 2.0
+    large_rcs_dbsm: float = 100.0  # 100: off
+    large_rcs_weight: float = 5.0
     rf_weight: float = 1.0
     rf_tau_s: float = 30.0
     rf_max: float = 3.0
@@ -89,6 +97,7 @@ class ScoreConfig:
     fused_weight: float = 1.5
     fused_tau_s: float = 10.0
     fused_nis: float = 3.0
+    lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
     age_weight: float = 0.5
     age_full_s: float = 10.0
     object_q: float = 5.0
@@ -132,6 +141,7 @@ class RadarObject:
         "n_reports",
         "nis_mean",
         "rcs_mean",
+        "rcs_seen",
         "rf_support",
         "rf_t",
         "sd_up",
@@ -152,6 +162,7 @@ class RadarObject:
         self.sd_up = 0.0  # moving average of the reports' vertical standard deviation
         self.nis_mean = 3.0
         self.rcs_mean = 0.0
+        self.rcs_seen = False  # any report with a finite RCS
         self.rf_support = 0.0
         self.rf_t = t
         self.fused = 0.0
@@ -194,6 +205,8 @@ class RadarObject:
             s -= cfg.ground_weight
         if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
             s -= cfg.erratic_weight
+        if self.rcs_seen and self.rcs_mean >= cfg.large_rcs_dbsm:
+            s -= cfg.large_rcs_weight
         # min(rf_max, rf_support_at(last_t)) and min(1, age / age_full_s) as conditionals
         sup = self.rf_support
         if sup != 0.0:
@@ -263,7 +276,11 @@ class ObjectTable:
             dt = 0.0
             obj.up = u
             obj.sd_up = math.sqrt(r[5])
-            obj.rcs_mean = rcs if rcs is not None else 0.0
+            if rcs is not None and math.isfinite(rcs):
+                obj.rcs_mean = rcs
+                obj.rcs_seen = True
+            else:
+                obj.rcs_mean = 0.0
             # one smoothing factor per time constant for this interval (the EMAs below)
             a = 0.0 if cfg.speed_tau_s <= 0 else 1.0
             b = 1.0 - a
@@ -290,7 +307,11 @@ class ObjectTable:
             obj.up = a * obj.up + b * u
             obj.sd_up = a * obj.sd_up + b * math.sqrt(r[5])
             if rcs is not None and math.isfinite(rcs):
-                obj.rcs_mean = a * obj.rcs_mean + b * rcs
+                if obj.rcs_seen:
+                    obj.rcs_mean = a * obj.rcs_mean + b * rcs
+                else:
+                    obj.rcs_mean = rcs
+                    obj.rcs_seen = True
             k = cfg.ground_release_sigmas
             if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
                 obj.aloft = True

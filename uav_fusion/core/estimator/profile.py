@@ -417,6 +417,7 @@ def _validate_tracker(p: Profile, where: str) -> None:
             "follow_min",
             "init_min",
             "bird_rcs_dbsm",
+            "large_rcs_dbsm",
             "vehicle_min_rcs_dbsm",
             "skip_radar_coasts",
         ):

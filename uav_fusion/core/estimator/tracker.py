@@ -519,6 +519,13 @@ class Tracker:
             # the CV filter's kernel directly (what CvFilter.nis calls for a 3D z)
             nis3 = f.kf.nis3 if isinstance(f, CvFilter) else None
             mark = self.objects.mark_fused if self.confirmed else None
+            cap = cfg.lost_sigma_m
+            if mark is not None and cap > 0:
+                p = f.mean()[1]
+                if (p[0] if p[0] > p[6] else p[6]) > cap * cap:
+                    # a long coast: the gate spans far more than the UAV's neighbourhood, so
+                    # an object inside it agrees with nothing in particular (not recorded)
+                    mark = None
             fused_nis = cfg.fused_nis
             g2 = self._g2
             for i, trk, obj, s in cands:
@@ -630,6 +637,14 @@ class Tracker:
                 best = e
         fol = self.objects.objects.get(self.followed) if self.followed is not None else None
         if best is None or fol is None or best[3] < fol.score(cfg) + cfg.challenge_margin:
+            ch = self._challenger
+            if (
+                best is None
+                and ch is not None
+                and not any(e[1].track_id == ch[0] for e in scored)
+            ):
+                # the challenger sent no fresh report this frame (a radar coast): its clock runs on
+                return False
             self._challenger = None
             return False
         tid = best[2].id
