@@ -28,19 +28,20 @@ from __future__ import annotations
 import argparse
 import sys
 from collections import Counter, defaultdict
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-from uav_fusion.core.bench.cache import cached_flights, generate_flight
-from uav_fusion.core.bench.definition import load_definition
+from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_flight
+from uav_fusion.core.bench.definition import BenchDefinition, load_definition
 from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator.multi import GridEpoch, MultiTracker, run_multi
 from uav_fusion.core.estimator.profile import load_profile
 from uav_fusion.core.estimator.runner import tracker_stream
 from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, score_flight
-from uav_fusion.core.records import RadarFrame
-from uav_fusion.core.site import load_site
+from uav_fusion.core.records import Flight, RadarFrame
+from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin import radar_model
 from uav_fusion.core.twin.config import load_twin_config
 from uav_fusion.core.twin.generate import TwinFlight, generate_twin
@@ -64,6 +65,24 @@ def radar_kinds(twin: TwinFlight) -> KindsByTrack:
         lst.sort()
         out[tid] = (np.array([x[0] for x in lst]), [(x[1], x[2]) for x in lst])
     return out
+
+
+def labelled_flights(
+    definition: BenchDefinition, split: str, cache: Path, site: Site, site_file: Path
+) -> Iterator[tuple[int, int, CachedFlight, Flight, KindsByTrack]]:
+    """Every flight of the split (generated into the cache first when missing), loaded, with
+    the kinds of its radar tracks from the twin generated again in memory: (number, count,
+    cached flight, flight, kinds)."""
+    twin_cfg = load_twin_config(definition.twin_config)
+    flights = cached_flights(definition, split, cache, site_file)
+    for k, cf in enumerate(flights, 1):
+        generate_flight(cf, definition, site)
+        flight = load_flight(cf.folder, site)
+        plan = load_flight_plan(cf.flight.plan.path, site)
+        twin = generate_twin(
+            site, twin_cfg, plan, seed=cf.flight.seed, duration_s=definition.duration_s
+        )
+        yield k, len(flights), cf, flight, radar_kinds(twin)
 
 
 def kind_at(kinds: KindsByTrack, track_id: int | None, t: float) -> tuple[str, int] | None:
@@ -91,22 +110,16 @@ def main(argv: list[str] | None = None) -> int:
     site = load_site(site_file)
     definition = load_definition(args.definition)
     profile = load_profile(args.profile)
-    twin_cfg = load_twin_config(definition.twin_config)
     air_min = definition.settings.airborne_min_m
     cut = MultiScoreSettings().gospa.c_m
     hz = definition.grid_hz
     pooled: Counter[str] = Counter()
     births: Counter[str] = Counter()
     excused = 0
-    flights = cached_flights(definition, args.split, Path(args.cache), site_file)
-    for k, cf in enumerate(flights, 1):
-        generate_flight(cf, definition, site)
-        flight = load_flight(cf.folder, site)
-        plan = load_flight_plan(cf.flight.plan.path, site)
-        twin = generate_twin(
-            site, twin_cfg, plan, seed=cf.flight.seed, duration_s=definition.duration_s
-        )
-        kinds = radar_kinds(twin)
+    n_flights = 0
+    for k, n_flights, cf, flight, kinds in labelled_flights(
+        definition, args.split, Path(args.cache), site, site_file
+    ):
         truths = {v: UavTruth(*flight.truth_arrays(v)) for v in flight.vehicles}
         vehicle_of = {radar_model.uav_object_id(i): v for i, v in enumerate(truths)}
         t0 = min(float(x.t[0]) for x in truths.values())
@@ -164,10 +177,10 @@ def main(argv: list[str] | None = None) -> int:
                     cats["uav: more than 100 m off"] += 1
         pooled.update(cats)
         summary = ", ".join(f"{c} {n}" for c, n in cats.most_common()) or "none"
-        print(f"[{k}/{len(flights)}] {cf.flight.flight_id}: false track-epochs: {summary}")
+        print(f"[{k}/{n_flights}] {cf.flight.flight_id}: false track-epochs: {summary}")
         sys.stdout.flush()
     total = sum(pooled.values())
-    print(f"\npooled over {len(flights)} flights: {total} false track-epochs")
+    print(f"\npooled over {n_flights} flights: {total} false track-epochs")
     if not args.strict_grounded:
         print(f"  (and {excused} track-epochs on UAVs not airborne, excused)")
     for c, n in pooled.most_common():

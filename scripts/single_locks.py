@@ -25,21 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
-from uav_fusion.core.bench.cache import cached_flights, generate_flight
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator.profile import load_profile
 from uav_fusion.core.estimator.runner import feed_tracker, tracker_stream
 from uav_fusion.core.estimator.tracker import Tracker
 from uav_fusion.core.records import RadarFrame
 from uav_fusion.core.site import load_site
-from uav_fusion.core.twin.config import load_twin_config
-from uav_fusion.core.twin.generate import generate_twin
-from uav_fusion.core.twin.trajectory import load_flight_plan
 from uav_fusion.resources import DEFAULT_SITE, config_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from multi_false_tracks import kind_at, radar_kinds
+from multi_false_tracks import kind_at, labelled_flights
 
 LOCK_M = 100.0
 
@@ -57,18 +52,12 @@ def main(argv: list[str] | None = None) -> int:
     definition = load_definition(args.definition)
     profiles = [load_profile(p) for p in args.profiles]
     names = [p.name for p in profiles]
-    twin_cfg = load_twin_config(definition.twin_config)
     pooled = {n: Counter[str]() for n in names}
     locked = dict.fromkeys(names, 0.0)
-    flights = cached_flights(definition, args.split, Path(args.cache), site_file)
-    for k, cf in enumerate(flights, 1):
-        generate_flight(cf, definition, site)
-        flight = load_flight(cf.folder, site)
-        plan = load_flight_plan(cf.flight.plan.path, site)
-        twin = generate_twin(
-            site, twin_cfg, plan, seed=cf.flight.seed, duration_s=definition.duration_s
-        )
-        kinds = radar_kinds(twin)
+    n_flights = 0
+    for k, n_flights, cf, flight, kinds in labelled_flights(
+        definition, args.split, Path(args.cache), site, site_file
+    ):
         tt, enu = flight.truth_arrays()
         parts = []
         for name, profile in zip(names, profiles, strict=True):
@@ -102,9 +91,9 @@ def main(argv: list[str] | None = None) -> int:
                 what = ", ".join(f"{c} {s:.1f}" for c, s in sorted(other.items()))
                 parts.append(f"{name}: {what} s; more than {LOCK_M:.0f} m off {lock:.1f} s")
         line = "; ".join(parts) or "the UAV only"
-        print(f"[{k}/{len(flights)}] {cf.flight.flight_id}: {line}")
+        print(f"[{k}/{n_flights}] {cf.flight.flight_id}: {line}")
         sys.stdout.flush()
-    print(f"\npooled over {len(flights)} flights (seconds of confirmed track by what it follows):")
+    print(f"\npooled over {n_flights} flights (seconds of confirmed track by what it follows):")
     for name in names:
         c = pooled[name]
         total = sum(c.values())
