@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -179,10 +179,7 @@ class RadarAlignment:
     def track(self, trk: RadarTrack) -> RadarTrack:
         """One report, corrected (what the trackers see of it)."""
         e, n, u = self.point(trk.e, trk.n, trk.u)
-        return RadarTrack(
-            trk.t, trk.track_id, trk.lat, trk.lon, trk.h, e, n, u, trk.vel_ned, trk.uav_prob,
-            trk.range_m, trk.rcs_dbsm, trk.radial_velocity, trk.num_inliers, trk.line,
-        )  # fmt: skip
+        return replace(trk, e=e, n=n, u=u)
 
     def frame(self, frame: RadarFrame) -> RadarFrame:
         """Every report of a frame, corrected (the frame itself when there is nothing to do)."""

@@ -197,11 +197,7 @@ def alignment_from_profile(profile: Profile, site: Site) -> RadarAlignment | Non
     ``el_bias_deg``), or None when both are 0."""
     if not (profile.radar_az_bias_deg or profile.radar_el_bias_deg):
         return None
-    return RadarAlignment(
-        tuple(float(v) for v in site.radar.enu),  # type: ignore[arg-type]
-        profile.radar_az_bias_deg,
-        profile.radar_el_bias_deg,
-    )
+    return RadarAlignment(site.radar.enu, profile.radar_az_bias_deg, profile.radar_el_bias_deg)
 
 
 def rf_model_from_profile(profile: Profile) -> RfRModel:
