@@ -456,6 +456,49 @@ def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site
     assert taken and taken[0].t < t_bird + 1.0
 
 
+def test_an_object_out_of_reach_of_a_coasting_track_is_not_followed(site: Site) -> None:
+    # both sensors lose the UAV for 19.5 s; 17 s in, an object classed 0.75 appears 800 m
+    # beyond where the track last was: inside the coasting track's grown gate, but farther
+    # than the UAV could have flown (track.max_speed_mps 30 x 17 s + reach_margin_m 200)
+    gap = (100.0, 119.5)
+    decoy_id = 777
+    t_decoy = 117.0
+
+    def seen(t: float) -> bool:
+        return not gap[0] <= t < gap[1]
+
+    def decoy(sc: Scene, t: float, k: int) -> RadarTrack | None:
+        if t < t_decoy:
+            return None
+        p0 = sc.uav(gap[0])
+        away = (p0 - sc.r0) * np.array([1.0, 1.0, 0.0])
+        p = p0 + 800.0 * away / np.linalg.norm(away) + np.array([3.0, 0.0, 0.0]) * (t - t_decoy)
+        return sc.report(t, decoy_id, p, 0.75, np.array([3.0, 0.0, 0.0]), rcs_dbsm=-22.0)
+
+    def stream() -> Scene:
+        sc = Scene(site, seed=6)
+        sc.build(170.0, uav_visible=seen, rf_ok=seen, fragment_s=gap[1], decoy=decoy)
+        return sc
+
+    sc = stream()
+    tracker, steps = _run(sc, site)
+    assert tracker.cfg.reach_margin_m == 200.0
+    assert not any(s.track_id == decoy_id and s.updated for s in steps)
+    back = [s for s in steps if s.updated and s.source == "radar" and s.t >= gap[1]]
+    assert back and back[0].t < gap[1] + 1.0
+    late = [s for s in steps if s.counted and s.t > gap[1] + 10.0]
+    assert late and max(sc.error(s) for s in late) < 40.0
+    # without the reach gate the track takes the object and stays on it for seconds after the
+    # UAV is back, 800 m and more off
+    prof = load_profile("tracker")
+    off = dataclasses.replace(prof, score=dataclasses.replace(prof.score, reach_margin_m=0.0))
+    sc0 = stream()
+    steps0 = run_tracker(Tracker(off, site), sc0.stream())
+    assert any(s.updated and s.track_id == decoy_id for s in steps0)
+    after0 = [s for s in steps0 if s.counted and gap[1] <= s.t < gap[1] + 5.0]
+    assert after0 and min(sc0.error(s) for s in after0) > 500.0
+
+
 def _swap_scene(
     site: Site, swap_t: float = 120.0, duration_s: float = 200.0, new_coasts: bool = False
 ) -> Scene:

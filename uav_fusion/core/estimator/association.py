@@ -98,6 +98,7 @@ class ScoreConfig:
     fused_tau_s: float = 10.0
     fused_nis: float = 3.0
     lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
+    reach_margin_m: float = 0.0  # single-UAV tracker: 0: no reach gate (Tracker._reachable)
     age_weight: float = 0.5
     age_full_s: float = 10.0
     object_q: float = 5.0

@@ -283,6 +283,8 @@ class Tracker:
         self.confirmed = False
         self.followed: int | None = None  # radar object id of the last radar update
         self.last_3d_t: float | None = None  # time of the last radar update
+        # the track's horizontal position after its last update (association.reach_margin_m)
+        self._last_pos = (0.0, 0.0)
         self.consecutive_rejections = 0
         # (object id, since when) of a strong object outside the gate that outscores the
         # followed one (association.challenge_s)
@@ -424,6 +426,7 @@ class Tracker:
         self.confirmed = not tentative
         self.segment += 1
         self.last_3d_t = None
+        self._last_pos = (x[0], x[1])
 
     def _confirmed_status(self) -> tuple[str, str | None]:
         reason = self._pending_reset
@@ -523,6 +526,7 @@ class Tracker:
                     # an object inside it agrees with nothing in particular (not recorded)
                     mark = None
             fused_nis = cfg.fused_nis
+            reach = cfg.reach_margin_m
             g2 = self._g2
             for i, trk, obj, s in cands:
                 r = rs[i]
@@ -535,6 +539,8 @@ class Tracker:
                     z = zs[i]
                     nis = nis3(z[0], z[1], z[2], r) if nis3 is not None else f.nis(z, r)
                     inside = nis <= g
+                if inside and reach > 0 and trk.track_id != self.followed:
+                    inside = self._reachable(t, z[0], z[1], reach)
                 if mark is not None:
                     mark(obj, nis <= fused_nis, t)
                 scored.append((i, trk, obj, s, z, r, nis, inside))
@@ -618,6 +624,17 @@ class Tracker:
         if len(z) == 3:
             self.last_3d_t = t
         return step
+
+    def _reachable(self, t: float, e: float, n: float, margin: float) -> bool:
+        """Whether the UAV could have flown from the track's position at its last update to
+        (``e``, ``n``) by ``t``: within ``track.max_speed_mps`` times the time since, plus
+        ``margin`` (measurement errors; no limit without a maximum speed)."""
+        vmax = self.profile.max_speed_mps
+        if vmax is None or self.last_update_t is None:
+            return True
+        d = vmax * max(0.0, t - self.last_update_t) + margin
+        e0, n0 = self._last_pos
+        return (e - e0) ** 2 + (n - n0) ** 2 <= d * d
 
     def _challenged(self, t: float, scored: Sequence[_Scored]) -> bool:
         """Whether a strong object outside the gate (score >= ``init_min`` and at least
@@ -711,6 +728,10 @@ class Tracker:
     ) -> TrackerStep:
         self._count(UPDATED)
         self._count(f"updated_{source}")
+        f = self.filter
+        if f is not None:
+            m = f.mean()[0]
+            self._last_pos = (m[0], m[1])
         self.consecutive_rejections = 0
         self.last_update_t = t
         return self._step(t, source, UPDATED, None, nis, z, track_id, score, weight)
