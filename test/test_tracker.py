@@ -14,10 +14,10 @@ import pytest
 import yaml
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimator import load_profile, run_flight
+from uav_fusion.core.estimator import Profile, load_profile, run_flight
 from uav_fusion.core.estimator.association import ObjectTable, ScoreConfig
 from uav_fusion.core.estimator.components import FixedRadarR, RadarAlignment
-from uav_fusion.core.estimator.runner import run_tracker
+from uav_fusion.core.estimator.runner import feed_tracker, run_tracker
 from uav_fusion.core.estimator.tracker import Tracker, TrackerStep
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import Site, load_site
@@ -109,6 +109,19 @@ def _imm(**changes: Any) -> dict[str, Any]:
         (
             lambda d: d["measurement"]["radar"].update(el_bias_deg=float("nan")),
             r"measurement\.radar: 'el_bias_deg' must be finite",
+        ),
+        (
+            lambda d: d["update"].update(notch_sigma_mps=-0.5),
+            r"update\.notch_sigma_mps must be > 0",
+        ),
+        (
+            lambda d: d["update"].update(notch_after_s=-1.0),
+            r"update\.notch_after_s must be >= 0 or null",
+        ),
+        (lambda d: d["update"].update(notch_range_m=0.0), r"update\.notch_range_m must be > 0"),
+        (
+            lambda d: d["association"].update(reach_margin_m=-5.0),
+            r"association\.reach_margin_m must be >= 0",
         ),
     ],
 )
@@ -401,6 +414,53 @@ def test_a_hover_in_the_doppler_notch_is_coasted_through(site: Site) -> None:
     assert after and after[0].t < notch[1] + 1.0  # radar picked up again at once
 
 
+class HoverScene(Scene):
+    """Out from the radar at 6 m/s, a hover from ``HOVER[0]`` to ``HOVER[1]`` 560 m out, and on."""
+
+    HOVER = (60.0, 80.0)
+
+    def uav(self, t: float) -> np.ndarray:
+        a, b = self.HOVER
+        s = 200.0 + 6.0 * (min(t, a) + max(0.0, t - b))
+        return self.r0 + np.array([0.8 * s, 0.6 * s, 50.0])
+
+
+def test_a_hover_the_radar_cannot_see_stops_the_coast_drifting(site: Site) -> None:
+    # in the hover the radar has no report (the Doppler notch) and no RF fix comes: the
+    # track coasts 20 s; the radar would see the UAV there unless its radial speed were
+    # about 0, so after update.notch_after_s the track's radial speed is measured as 0
+    a, b = HoverScene.HOVER
+    t_end = b - 0.25  # the last radar frame of the hover
+
+    def seen(t: float) -> bool:
+        return not a <= t < b
+
+    def error_at_hover_end(prof: Profile) -> tuple[float, Tracker]:
+        sc = HoverScene(site, seed=12)
+        sc.build(120.0, uav_visible=seen, rf_ok=seen, clutter=True)
+        tracker = Tracker(prof, site)
+        for item in sc.stream():
+            if item.t > t_end:
+                break
+            # as the offline runner and the node feed it: frames without a report are skipped
+            # (a reflector elsewhere keeps the radar's frames coming through the hover)
+            if not isinstance(item, RadarFrame) or item.tracks:
+                feed_tracker(tracker, item)
+        assert tracker.confirmed and tracker.t == t_end
+        x, _ = tracker.predict_to(t_end)
+        return float(np.linalg.norm(np.asarray(x[:3]) - sc.uav(t_end))), tracker
+
+    prof = load_profile("tracker")
+    assert prof.notch_after_s is not None and prof.notch_after_s < 10.0
+    err, tracker = error_at_hover_end(prof)
+    assert tracker.counters.get("notch", 0) > 0
+    assert err < 40.0
+    # without it the track flies on at 6 m/s: more than 80 m off by the end of the hover
+    err0, tracker0 = error_at_hover_end(dataclasses.replace(prof, notch_after_s=None))
+    assert tracker0.counters.get("notch", 0) == 0
+    assert err0 > 80.0
+
+
 def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
     sc = Scene(site, seed=4)
     gap = (80.0, 140.0)  # neither radar nor RF for 60 s (beyond max_coast_s)
@@ -440,7 +500,10 @@ def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site
         return sc
 
     sc = stream()
-    tracker, steps = _run(sc, site)
+    # the rule alone: without the radial-speed pseudo-measurement, which narrows the gate
+    base = dataclasses.replace(load_profile("tracker"), notch_after_s=None)
+    tracker = Tracker(base, site)
+    steps = run_tracker(tracker, sc.stream())
     assert tracker.cfg.lost_sigma_m > 0
     assert not any(s.track_id == bird_id and (s.updated or s.coasted) for s in steps)
     back = [s for s in steps if s.updated and s.source == "radar" and s.t >= gap[1]]
@@ -449,8 +512,7 @@ def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site
     assert late and max(sc.error(s) for s in late) < 40.0
     # without the rule the object's first report inside the wide gate counts as agreement
     # with the track, which is enough to follow it (the track jumps 150 m and stays there)
-    prof = load_profile("tracker")
-    off = dataclasses.replace(prof, score=dataclasses.replace(prof.score, lost_sigma_m=0.0))
+    off = dataclasses.replace(base, score=dataclasses.replace(base.score, lost_sigma_m=0.0))
     steps0 = run_tracker(Tracker(off, site), stream().stream())
     taken = [s for s in steps0 if s.updated and s.track_id == bird_id]
     assert taken and taken[0].t < t_bird + 1.0
@@ -481,7 +543,10 @@ def test_an_object_out_of_reach_of_a_coasting_track_is_not_followed(site: Site) 
         return sc
 
     sc = stream()
-    tracker, steps = _run(sc, site)
+    # the rule alone: without the radial-speed pseudo-measurement, which narrows the gate
+    base = dataclasses.replace(load_profile("tracker"), notch_after_s=None)
+    tracker = Tracker(base, site)
+    steps = run_tracker(tracker, sc.stream())
     assert tracker.cfg.reach_margin_m == 200.0
     assert not any(s.track_id == decoy_id and s.updated for s in steps)
     back = [s for s in steps if s.updated and s.source == "radar" and s.t >= gap[1]]
@@ -490,8 +555,7 @@ def test_an_object_out_of_reach_of_a_coasting_track_is_not_followed(site: Site) 
     assert late and max(sc.error(s) for s in late) < 40.0
     # without the reach gate the track takes the object and stays on it for seconds after the
     # UAV is back, 800 m and more off
-    prof = load_profile("tracker")
-    off = dataclasses.replace(prof, score=dataclasses.replace(prof.score, reach_margin_m=0.0))
+    off = dataclasses.replace(base, score=dataclasses.replace(base.score, reach_margin_m=0.0))
     sc0 = stream()
     steps0 = run_tracker(Tracker(off, site), sc0.stream())
     assert any(s.updated and s.track_id == decoy_id for s in steps0)

@@ -230,6 +230,32 @@ def test_cv_filter_matches_the_matrix_reference() -> None:
         assert nis_ours == pytest.approx(nis, rel=1e-9)
 
 
+@pytest.mark.parametrize("imm", [False, True])
+def test_a_linear_pseudo_measurement_matches_filterpy(imm: bool) -> None:
+    # the radial speed (unit vector u over the velocity) measured as 0 with sigma 0.5 m/s
+    x0 = np.array([300.0, -200.0, 50.0, 6.0, -3.0, 1.0])
+    A = np.random.default_rng(5).normal(size=(6, 6))
+    P0 = A @ A.T + np.diag([400.0, 300.0, 200.0, 20.0, 30.0, 10.0])
+    u = x0[:3] / np.linalg.norm(x0[:3])
+    h = np.concatenate([np.zeros(3), u])
+    ref = KalmanFilter(dim_x=6, dim_z=1)
+    ref.x, ref.P, ref.H, ref.R = x0.copy(), P0.copy(), h[None, :], np.array([[0.25]])
+    ref.update(np.array([0.0]))
+    f: CvFilter | ImmFilter
+    if imm:
+        qs = ((0.5, 0.5, 0.2), (20.0, 20.0, 5.0))
+        f = ImmFilter(qs, ((0.97, 0.03), (0.06, 0.94)), (0.5, 0.5))
+    else:
+        f = CvFilter((1.0, 1.0, 1.0))
+    f.set_state(x0, P0)
+    f.update_linear(h.tolist(), 0.0, 0.25)
+    xo, Po = packed_arrays(*f.mean())
+    np.testing.assert_allclose(xo, ref.x.ravel(), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(Po, ref.P, rtol=1e-9, atol=1e-9)
+    assert float(xo[3:] @ u) == pytest.approx(float(ref.x.ravel()[3:] @ u), abs=1e-12)
+    assert abs(float(xo[3:] @ u)) < abs(float(x0[3:] @ u))  # pulled towards 0
+
+
 def _filterpy_mode(q: tuple[float, float, float], x0: np.ndarray, P0: np.ndarray) -> KalmanFilter:
     kf = KalmanFilter(dim_x=6, dim_z=3)
     kf.x = x0.copy()

@@ -52,6 +52,7 @@ class MotionFilter(Protocol):
     def mode_probabilities(self) -> tuple[float, ...]: ...
     def effective_q(self) -> Q3: ...
     def update_scalar(self, idx: int, value: float, var: float) -> None: ...
+    def update_linear(self, h: Sequence[float], value: float, var: float) -> None: ...
 
 
 def _nis(kf: CvKalman, z: Sequence[float], r: PackedR) -> float:
@@ -73,6 +74,18 @@ def update_scalar(kf: CvKalman, idx: int, value: float, var: float) -> None:
     col = [p[UPPER_INDEX[a][idx]] for a in range(6)]
     s = col[idx] + var
     y = value - kf.x[idx]
+    kf.x = [xa + ca * y / s for xa, ca in zip(kf.x, col, strict=True)]
+    kf.P = [pv - col[i] * col[j] / s for pv, i, j in zip(p, _PI, _PJ, strict=True)]
+
+
+def update_linear(kf: CvKalman, h: Sequence[float], value: float, var: float) -> None:
+    """Update with a scalar pseudo-measurement ``h . x`` (``h`` over the 6 state elements,
+    variance ``var``): ``K = P h / (h^T P h + var)``, ``x += K (value - h . x)``,
+    ``P -= K K^T (h^T P h + var)``."""
+    p = kf.P
+    col = [sum(p[UPPER_INDEX[a][b]] * h[b] for b in range(6) if h[b]) for a in range(6)]
+    s = sum(h[a] * col[a] for a in range(6)) + var
+    y = value - sum(h[a] * kf.x[a] for a in range(6))
     kf.x = [xa + ca * y / s for xa, ca in zip(kf.x, col, strict=True)]
     kf.P = [pv - col[i] * col[j] / s for pv, i, j in zip(p, _PI, _PJ, strict=True)]
 
@@ -132,6 +145,9 @@ class CvFilter:
 
     def update_scalar(self, idx: int, value: float, var: float) -> None:
         update_scalar(self.kf, idx, value, var)
+
+    def update_linear(self, h: Sequence[float], value: float, var: float) -> None:
+        update_linear(self.kf, h, value, var)
 
     def effective_q(self) -> Q3:
         return self.kf.q
@@ -279,6 +295,12 @@ class ImmFilter:
         """The pseudo-measurement applied to every mode (mode probabilities unchanged)."""
         for m in self.modes:
             update_scalar(m, idx, value, var)
+        self._mean = None
+
+    def update_linear(self, h: Sequence[float], value: float, var: float) -> None:
+        """The pseudo-measurement applied to every mode (mode probabilities unchanged)."""
+        for m in self.modes:
+            update_linear(m, h, value, var)
         self._mean = None
 
     def effective_q(self) -> Q3:

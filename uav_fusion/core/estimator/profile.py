@@ -89,6 +89,11 @@ class Profile:
     robust_huber_k: float = 1.5
     vz_hold_after_s: float | None = None  # RF-only: pseudo-measurement vz = 0 after this long
     vz_hold_sigma_mps: float = 1.0
+    # no radar update for this long with the track inside notch_range_m of the radar:
+    # pseudo-measurement radial speed = 0 (the UAV hovers in the Doppler notch); None: off
+    notch_after_s: float | None = None
+    notch_sigma_mps: float = 1.0
+    notch_range_m: float = 1000.0
     association: str | None = None  # None: radar_selection (paper); "track_score": tracker
     score: ScoreConfig = field(default_factory=ScoreConfig)
     smoother_lag_s: float | None = None  # fixed-lag smoothing of the tracker's steps
@@ -178,6 +183,9 @@ class Profile:
                 "huber_k": self.robust_huber_k,
                 "vz_hold_after_s": self.vz_hold_after_s,
                 "vz_hold_sigma_mps": self.vz_hold_sigma_mps,
+                "notch_after_s": self.notch_after_s,
+                "notch_sigma_mps": self.notch_sigma_mps,
+                "notch_range_m": self.notch_range_m,
             }
             d["association"] = {"mode": "track_score", **asdict(self.score)}
             del d["radar_selection"]
@@ -210,7 +218,16 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "measurement.rf": (
         *("R", "model", "cep_scale", "floor_m", "ref_sensors", "sensor_exponent", "max_cep_m"),
     ),
-    "update": ("robust", "dof", "huber_k", "vz_hold_after_s", "vz_hold_sigma_mps"),
+    "update": (
+        "robust",
+        "dof",
+        "huber_k",
+        "vz_hold_after_s",
+        "vz_hold_sigma_mps",
+        "notch_after_s",
+        "notch_sigma_mps",
+        "notch_range_m",
+    ),
     "association": ("mode", *score_keys()),
     "smoother": ("lag_s",),
     "gating": ("range_gate_m", "far_gate_m", "nis_probability", "min_uav_prob"),
@@ -389,6 +406,12 @@ def _validate_tracker(p: Profile, where: str) -> None:
         raise ConfigError(f"{where}: update.vz_hold_after_s must be >= 0 or null")
     if not p.vz_hold_sigma_mps > 0:
         raise ConfigError(f"{where}: update.vz_hold_sigma_mps must be > 0")
+    if p.notch_after_s is not None and not p.notch_after_s >= 0:
+        raise ConfigError(f"{where}: update.notch_after_s must be >= 0 or null")
+    if not p.notch_sigma_mps > 0:
+        raise ConfigError(f"{where}: update.notch_sigma_mps must be > 0")
+    if not p.notch_range_m > 0:
+        raise ConfigError(f"{where}: update.notch_range_m must be > 0")
     if p.motion_model == "imm":
         n = len(p.imm_q)
         if n < 2:
@@ -619,6 +642,9 @@ def _tracker_fields(
     out["robust_huber_k"] = _float(update, "huber_k", at_u, 1.5)
     out["vz_hold_after_s"] = _opt_float(update, "vz_hold_after_s", at_u, None)
     out["vz_hold_sigma_mps"] = _float(update, "vz_hold_sigma_mps", at_u, 1.0)
+    out["notch_after_s"] = _opt_float(update, "notch_after_s", at_u, None)
+    out["notch_sigma_mps"] = _float(update, "notch_sigma_mps", at_u, 1.0)
+    out["notch_range_m"] = _float(update, "notch_range_m", at_u, 1000.0)
     mode = _choice(assoc, "mode", ASSOCIATIONS, "largest_track", f"{where}: association")
     if mode == "track_score":
         out["association"] = mode

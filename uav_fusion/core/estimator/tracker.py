@@ -283,6 +283,7 @@ class Tracker:
         self.confirmed = False
         self.followed: int | None = None  # radar object id of the last radar update
         self.last_3d_t: float | None = None  # time of the last radar update
+        self.last_radar_t: float | None = None  # ... of any radar update (3D or horizontal)
         # the track's horizontal position after its last update (association.reach_margin_m)
         self._last_pos = (0.0, 0.0)
         self.consecutive_rejections = 0
@@ -426,6 +427,7 @@ class Tracker:
         self.confirmed = not tentative
         self.segment += 1
         self.last_3d_t = None
+        self.last_radar_t = None
         self._last_pos = (x[0], x[1])
 
     def _confirmed_status(self) -> tuple[str, str | None]:
@@ -499,7 +501,31 @@ class Tracker:
         if cands:
             for i, step in self._radar_candidates(t, cands, rs, far, zs):
                 out[i] = step
+        if self.profile.notch_after_s is not None:
+            self._notch(t)
         return [s for s in out if s is not None]
+
+    def _notch(self, t: float) -> None:
+        """At a radar frame: no radar update for ``update.notch_after_s`` with the track
+        within ``update.notch_range_m`` of the radar. The radar would see the UAV there
+        unless its radial speed sits in the Doppler notch, so a pseudo-measurement radial
+        speed = 0 (sigma ``update.notch_sigma_mps``) is fused (a hover stops the coast's
+        drift). No step is made; the next step carries the state."""
+        p = self.profile
+        f = self.filter
+        after = p.notch_after_s
+        last = self.last_radar_t
+        if f is None or not self.confirmed or after is None or last is None or t - last < after:
+            return
+        x = f.mean()[0]
+        rx, ry, rz = self._radar_pos
+        dx, dy, dz = x[0] - rx, x[1] - ry, x[2] - rz
+        rng = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if not 1.0 < rng <= p.notch_range_m:
+            return
+        sd = p.notch_sigma_mps
+        f.update_linear((0.0, 0.0, 0.0, dx / rng, dy / rng, dz / rng), 0.0, sd * sd)
+        self._count("notch")
 
     def _radar_candidates(
         self,
@@ -621,6 +647,7 @@ class Tracker:
         f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
         step = self._used(t, RADAR, nis, z, trk.track_id, s, w)
         self.followed = trk.track_id
+        self.last_radar_t = t
         if len(z) == 3:
             self.last_3d_t = t
         return step
@@ -702,6 +729,7 @@ class Tracker:
             self.last_update_t = t
             self.followed = trk.track_id
             self.last_3d_t = None if flat else t
+            self.last_radar_t = t
             status, reason = self._confirmed_status()
             self._count(f"{status}_{RADAR}")
             res.append((i, self._step(t, RADAR, status, reason, None, zs[i], trk.track_id, s)))
