@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
 import json
 import pickle
 from pathlib import Path
@@ -11,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from script_util import load_script
 
 from uav_fusion.cli import main
 from uav_fusion.core.bench.cache import LABELS_FILE, cached_flights, generate_flight, read_labels
@@ -171,10 +171,7 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     readme.write_text(
         "# x\n<!-- bench-accuracy:begin -->\nold\n<!-- bench-accuracy:end -->\nafter\n"
     )
-    spec = importlib.util.spec_from_file_location("ubr", ROOT / "scripts/update_bench_readme.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script("update_bench_readme")
     assert mod.main([str(out), "--readme", str(readme)]) == 0
     new = readme.read_text()
     assert "old" not in new and new.endswith("<!-- bench-accuracy:end -->\nafter\n")

@@ -3,14 +3,12 @@ measurement covariances as ours, and two confirmed tracks on two crossing UAVs."
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from datetime import timedelta
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
+from script_util import load_script
 from test_multi_tracker import Crossing
 
 from uav_fusion.core.estimator import load_profile
@@ -28,17 +26,9 @@ from uav_fusion.core.site import Site, load_site
 
 pytest.importorskip("stonesoup")
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "multi_baseline.py"
-
-
 @pytest.fixture(scope="module")
 def mb() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("multi_baseline", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["multi_baseline"] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("multi_baseline")
 
 
 @pytest.fixture(scope="module")

@@ -8,14 +8,13 @@ memory off. Skipped only where user namespaces are unavailable.
 
 from __future__ import annotations
 
-import importlib.util
 import os
-import sys
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 import pytest
+from script_util import load_script
 from test_graph_flight import write_flight
 
 from uav_fusion.core.dataset import load_flight
@@ -29,13 +28,7 @@ WINDOW_S = 20.0  # fusion_node reorder_window_s in both runs
 
 
 def _load_multihost() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "scripts" / "multihost.py"
-    spec = importlib.util.spec_from_file_location("multihost", path)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["multihost"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("multihost")
 
 
 mh = _load_multihost()

@@ -3,25 +3,16 @@ epochs with nothing published, and gross ones."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
-
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "single_misses.py"
+from script_util import load_script
 
 
 @pytest.fixture(scope="module")
 def sm() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("single_misses", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["single_misses"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("single_misses")
 
 
 def test_uncovered_epochs_are_start_up_re_entry_or_other(sm: ModuleType) -> None:
