@@ -51,7 +51,12 @@ from uav_fusion.core.estimator.runner import run_flight
 from uav_fusion.core.estimator.track import UPDATED
 from uav_fusion.core.estimator.tracker import TrackerStep
 from uav_fusion.core.grid import grid_from_steps
-from uav_fusion.core.gridscore import FlightTruth, ScoreSettings, epoch_errors
+from uav_fusion.core.gridscore import (
+    FlightTruth,
+    ScoreSettings,
+    epoch_errors,
+    observable_epochs,
+)
 from uav_fusion.core.records import RADAR
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
@@ -140,11 +145,8 @@ def main(argv: list[str] | None = None) -> int:
         result = run_flight(flight, profile, site)
         grid = grid_from_steps(result.steps, profile, GRID_HZ, *truth.span)
         ee = epoch_errors(grid, truth, settings)
-        rt = np.sort(read_labels(cf.folder))
-        w = settings.observable_window_s
-        obs = ee.airborne & (
-            np.searchsorted(rt, grid.t + w, side="right")
-            > np.searchsorted(rt, grid.t - w, side="left")
+        obs = observable_epochs(
+            grid.t, ee.airborne, read_labels(cf.folder), settings.observable_window_s
         )
         n_obs += int(obs.sum())
         tracked = np.flatnonzero(ee.airborne & grid.has_track)

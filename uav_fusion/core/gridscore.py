@@ -193,6 +193,17 @@ def epoch_errors(
     return EpochErrors(airborne, cov, ref, err, ne)
 
 
+def observable_epochs(
+    t: FloatArray, airborne: npt.NDArray[np.bool_], uav_report_t: FloatArray, window_s: float
+) -> npt.NDArray[np.bool_]:
+    """The radar-observable epochs: airborne, with a radar report of the UAV (times
+    ``uav_report_t``, any order) within ``window_s`` of the epoch."""
+    rt = np.sort(np.asarray(uav_report_t, dtype=float))
+    lo = np.searchsorted(rt, t - window_s, side="left")
+    hi = np.searchsorted(rt, t + window_s, side="right")
+    return np.asarray(airborne & (hi > lo), dtype=bool)
+
+
 def score_grid(
     grid: Grid,
     truth: FlightTruth,
@@ -215,11 +226,7 @@ def score_grid(
     if uav_report_t is None:
         n_obs, n_obs_cov, n_obs_gross = -1, 0, 0
     else:
-        rt = np.sort(np.asarray(uav_report_t, dtype=float))
-        w = s.observable_window_s
-        lo = np.searchsorted(rt, grid.t - w, side="left")
-        hi = np.searchsorted(rt, grid.t + w, side="right")
-        obs = airborne & (hi > lo)
+        obs = observable_epochs(grid.t, airborne, uav_report_t, s.observable_window_s)
         n_obs = int(np.count_nonzero(obs))
         n_obs_cov = int(np.count_nonzero(obs & cov))
         gross_all = np.zeros(grid.t.size, dtype=bool)

@@ -37,6 +37,7 @@ Q3 = tuple[float, float, float]
 _PAIRS = tuple((i, j) for i in range(6) for j in range(i, 6))
 _PI = tuple(i for i, _ in _PAIRS)
 _PJ = tuple(j for _, j in _PAIRS)
+_UNIT = tuple(tuple(1.0 if i == k else 0.0 for i in range(6)) for k in range(6))
 _LOG2PI = math.log(2.0 * math.pi)
 
 
@@ -69,13 +70,8 @@ def _update(kf: CvKalman, z: Sequence[float], r: PackedR) -> float:
 
 def update_scalar(kf: CvKalman, idx: int, value: float, var: float) -> None:
     """Update with a scalar pseudo-measurement of state element ``idx`` (variance ``var``):
-    ``K = P e_i / (P_ii + var)``, ``x += K (value - x_i)``, ``P -= K K^T (P_ii + var)``."""
-    p = kf.P
-    col = [p[UPPER_INDEX[a][idx]] for a in range(6)]
-    s = col[idx] + var
-    y = value - kf.x[idx]
-    kf.x = [xa + ca * y / s for xa, ca in zip(kf.x, col, strict=True)]
-    kf.P = [pv - col[i] * col[j] / s for pv, i, j in zip(p, _PI, _PJ, strict=True)]
+    :func:`update_linear` with ``h = e_idx`` (``K = P e_i / (P_ii + var)``)."""
+    update_linear(kf, _UNIT[idx], value, var)
 
 
 def update_linear(kf: CvKalman, h: Sequence[float], value: float, var: float) -> None:

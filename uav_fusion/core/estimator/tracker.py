@@ -282,7 +282,7 @@ class Tracker:
         self.last_update_t: float | None = None
         self.confirmed = False
         self.followed: int | None = None  # radar object id of the last radar update
-        self.last_3d_t: float | None = None  # time of the last radar update
+        self.last_3d_t: float | None = None  # time of the last 3D radar update
         self.last_radar_t: float | None = None  # ... of any radar update (3D or horizontal)
         # the track's horizontal position after its last update (association.reach_margin_m)
         self._last_pos = (0.0, 0.0)
