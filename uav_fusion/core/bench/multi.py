@@ -211,7 +211,7 @@ def multi_score_task(task: MultiScoreTask) -> MultiFlightResult:
     outcomes = []
     for u in samples.uavs:
         lab = np.sort(labels.get(u.name, np.zeros(0)))
-        obs = _near(u.times, lab, task.observable_window_s)
+        obs = near_labels(u.times, lab, task.observable_window_s)
         cov = u.covered()
         outcomes.append(
             UavOutcome(u.name, u.name in silent, int(obs.sum()), int((obs & cov).sum()))
@@ -256,7 +256,7 @@ def crossing_switches(
     return counts, away
 
 
-def _near(times: FloatArray, labels: FloatArray, window: float) -> npt.NDArray[np.bool_]:
+def near_labels(times: FloatArray, labels: FloatArray, window: float) -> npt.NDArray[np.bool_]:
     """Per time: a label lies within ``window`` of it (``labels`` sorted)."""
     if times.size == 0 or labels.size == 0:
         return np.zeros(times.size, dtype=bool)
