@@ -32,12 +32,10 @@ import numpy.typing as npt
 
 from uav_fusion.core.bench.cache import cached_flights, generate_flight, read_vehicle_labels
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.bench.multi import near_labels, silent_vehicles
+from uav_fusion.core.bench.multi import MultiScoreTask, multi_score_task, near_labels
 from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator.multi import MultiTracker, run_multi
 from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, score_flight
+from uav_fusion.core.multiscore import UavTruth
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 
@@ -83,24 +81,24 @@ def main(argv: list[str] | None = None) -> int:
     definition = load_definition(args.definition)
     profile = load_profile(args.profile)
     st = definition.settings
-    settings = MultiScoreSettings(step_s=1.0 / definition.grid_hz, airborne_min_m=st.airborne_min_m)
     pooled: Counter[str] = Counter()
     pooled_silent: Counter[str] = Counter()
     n_epochs = n_silent = 0
     flights = cached_flights(definition, args.split, Path(args.cache), site_file)
     for k, cf in enumerate(flights, 1):
         generate_flight(cf, definition, site)
+        # run and scored by the benchmark's own task; the flight is read again for its truth
+        result = multi_score_task(
+            MultiScoreTask(
+                cf, profile, site, definition.grid_hz, st.airborne_min_m, st.observable_window_s
+            )
+        )
         flight = load_flight(cf.folder, site)
         truths = {v: UavTruth(*flight.truth_arrays(v)) for v in flight.vehicles}
-        t0 = min(float(x.t[0]) for x in truths.values())
-        t1 = max(float(x.t[-1]) for x in truths.values())
-        stream = list(tracker_stream(flight, profile))
-        epochs = run_multi(MultiTracker(profile, site), stream, definition.grid_hz, t0, t1)
-        samples = score_flight(truths, epochs, settings)
         labels = read_vehicle_labels(cf.folder)
-        silent = silent_vehicles(cf.folder)
+        silent = {u.name for u in result.uavs if u.silent}
         counts: Counter[str] = Counter()
-        for u in samples.uavs:
+        for u in result.samples.uavs:
             tr = truths[u.name]
             pos = _at(tr, u.times)
             low = pos[:, 2] - tr.enu[0, 2] <= args.low_m
