@@ -34,7 +34,7 @@ import csv
 import json
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -183,8 +183,13 @@ def _span(near: npt.NDArray[np.bool_], k: int) -> tuple[int, int]:
     return lo, hi
 
 
-def multi_score_task(task: MultiScoreTask) -> MultiFlightResult:
-    """Run the multi-UAV tracker over the cached flight and score its tracks as a set."""
+def multi_score_task(
+    task: MultiScoreTask, make_tracker: Callable[[Flight], MultiTracker] | None = None
+) -> MultiFlightResult:
+    """Run the multi-UAV tracker over the cached flight and score its tracks as a set.
+
+    ``make_tracker`` builds the tracker for the loaded flight instead of
+    ``MultiTracker(task.profile, task.site)`` (a script's variant, scored the same way)."""
     cf = task.flight
     flight = load_flight(cf.folder, task.site)
     truths: dict[str, UavTruth] = {}
@@ -198,7 +203,10 @@ def multi_score_task(task: MultiScoreTask) -> MultiFlightResult:
     t1 = max(float(tr.t[-1]) for tr in truths.values())
     stream = list(tracker_stream(flight, task.profile))
     start = time.perf_counter()
-    epochs = run_multi(MultiTracker(task.profile, task.site), stream, task.grid_hz, t0, t1)
+    tracker = (
+        MultiTracker(task.profile, task.site) if make_tracker is None else make_tracker(flight)
+    )
+    epochs = run_multi(tracker, stream, task.grid_hz, t0, t1)
     run_s = time.perf_counter() - start
     settings = MultiScoreSettings(
         step_s=1.0 / task.grid_hz,
