@@ -18,6 +18,7 @@ from uav_fusion.core.estimator import load_profile
 from uav_fusion.core.estimator.multi import (
     UNKNOWN_EMITTER,
     GridEpoch,
+    MultiSettings,
     MultiTracker,
     TrackOutput,
     _merge_nis,
@@ -560,3 +561,11 @@ def test_beyond_the_range_gate_tracks_are_updated_and_born_horizontally(site: Si
         MultiTracker(prof.with_changes(far_gate_m=None), site), stream, 1.0, 1000.0, 1109.0
     )
     assert sum(1 for ep in near if ep.tracks and high(ep.t - 1000.0)) < 10
+
+
+def test_the_class_read_for_age_is_the_single_uav_trackers_unless_asked_for(site: Site) -> None:
+    p = load_profile("tracker")
+    assert p.score.class_prior_logit == -1.0
+    assert MultiTracker(p, site).cfg.class_prior_logit is None
+    on = MultiTracker(p, site, MultiSettings(class_by_age=True))
+    assert on.cfg.class_prior_logit == -1.0 and on.objects.cfg.class_prior_logit == -1.0

@@ -123,6 +123,22 @@ def _imm(**changes: Any) -> dict[str, Any]:
             lambda d: d["association"].update(reach_margin_m=-5.0),
             r"association\.reach_margin_m must be >= 0",
         ),
+        (
+            lambda d: d["association"].update(class_min_weight=0.0),
+            r"association\.class_min_weight must be in \(0, 1\]",
+        ),
+        (
+            lambda d: d["association"].update(class_age_tau_s=0.0),
+            r"association\.class_age_tau_s must be > 0",
+        ),
+        (
+            lambda d: d["association"].update(class_prior_logit=float("inf")),
+            r"association: 'class_prior_logit' must be finite",
+        ),
+        (
+            lambda d: d["association"].update(class_prior_logit="low"),
+            r"association.*class_prior_logit",
+        ),
     ],
 )
 def test_tracker_profile_errors_name_file_and_key(
@@ -477,6 +493,16 @@ def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
     assert later and max(sc.error(s) for s in later) < 40.0
 
 
+def _rule_alone() -> Profile:
+    """The tracker without the radial-speed pseudo-measurement (which narrows the gate) and
+    without the young-track reading of the class (this scene's radar gives a new track its
+    class from the first report on, with no classifier prior to leave)."""
+    p = load_profile("tracker")
+    return dataclasses.replace(
+        p, notch_after_s=None, score=dataclasses.replace(p.score, class_prior_logit=None)
+    )
+
+
 def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site: Site) -> None:
     # the UAV is lost to both sensors for 16 s; 10 s in, a bird-like object (classed 0.3,
     # small, smooth) appears 150 m from where the track predicts it, well inside the grown
@@ -500,8 +526,7 @@ def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site
         return sc
 
     sc = stream()
-    # the rule alone: without the radial-speed pseudo-measurement, which narrows the gate
-    base = dataclasses.replace(load_profile("tracker"), notch_after_s=None)
+    base = _rule_alone()
     tracker = Tracker(base, site)
     steps = run_tracker(tracker, sc.stream())
     assert tracker.cfg.lost_sigma_m > 0
@@ -543,8 +568,7 @@ def test_an_object_out_of_reach_of_a_coasting_track_is_not_followed(site: Site) 
         return sc
 
     sc = stream()
-    # the rule alone: without the radial-speed pseudo-measurement, which narrows the gate
-    base = dataclasses.replace(load_profile("tracker"), notch_after_s=None)
+    base = _rule_alone()
     tracker = Tracker(base, site)
     steps = run_tracker(tracker, sc.stream())
     assert tracker.cfg.reach_margin_m == 200.0
@@ -1045,3 +1069,76 @@ def test_an_rf_fix_credits_every_object_in_its_gate_or_only_the_nearest(
         assert hits == 2 and b.rf_support == 1.0
     # a fix outside both gates credits nobody
     assert table.rf_fix(104.5, 900.0, 300.0, 400.0) == 0
+
+
+def _classifier(target_logit: float) -> Callable[[float], float]:
+    """A radar classifier's output for a track of age ``t``: it starts at the prior (logit -1)
+    and moves towards ``target_logit`` as features accumulate (time constant 5 s)."""
+
+    def prob(t: float) -> float:
+        lg = -1.0 + (1.0 - math.exp(-t / 5.0)) * (target_logit + 1.0)
+        return 1.0 / (1.0 + math.exp(-lg))
+
+    return prob
+
+
+def test_a_young_uav_track_is_taken_sooner_when_its_class_is_read_for_its_age(
+    site: Site,
+) -> None:
+    """The UAV's radar track and a slow bird-like object's both start at the classifier's prior;
+    read for their age (association.class_prior_logit) the UAV's class shows about 2 s
+    sooner, and the other object is never taken either way."""
+    decoy_id = 444
+    not_uav = _classifier(-0.5)  # a rotor-like non-UAV: never above 0.5
+
+    def decoy(sc: Scene, t: float, k: int) -> RadarTrack | None:
+        p = sc.uav(0.0) + np.array([-250.0, 120.0, 10.0]) + np.array([3.0, 0.0, 0.0]) * t
+        return sc.report(t, decoy_id, p, not_uav(t), np.array([3.0, 0.0, 0.0]), rcs_dbsm=-22.0)
+
+    firsts = {}
+    for reading in (True, False):
+        sc = Scene(site, seed=12)
+        sc.build(60.0, uav_prob=_classifier(2.8), rf_ok=lambda t: False, decoy=decoy)
+        p = load_profile("tracker")
+        assert p.score.class_prior_logit == -1.0
+        if not reading:
+            p = dataclasses.replace(p, score=dataclasses.replace(p.score, class_prior_logit=None))
+        steps = run_tracker(Tracker(p, site), sc.stream())
+        assert not any(s.track_id == decoy_id and (s.updated or s.coasted) for s in steps)
+        first = [s for s in steps if s.status == "initialised"]
+        assert first and first[0].track_id == 10
+        firsts[reading] = first[0].t
+    assert firsts[True] <= firsts[False] - 1.5  # 3.25 s against 5.25 s
+
+
+def test_a_reports_class_is_read_for_its_radar_tracks_age() -> None:
+    """logit -> prior + (logit - prior) / max(min_weight, 1 - exp(-age / tau)), and the class
+    history starts at the prior (hand values)."""
+    cfg = dataclasses.replace(
+        ScoreConfig(), class_prior_logit=-1.0, class_age_tau_s=4.0, class_min_weight=0.4,
+        class_tau_s=3.0,
+    )  # fmt: skip
+    table = ObjectTable(cfg, FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
+
+    def rep(t: float, p: float) -> RadarTrack:
+        return RadarTrack(t, 7, 0.0, 0.0, 0.0, 100.0, 200.0, 50.0, (0.0, 1.0, 0.0), p, None, -10.0)
+
+    obj = table.update(rep(10.0, 0.5))  # age 0: weight 0.4; the history starts at the prior
+    assert obj.class_logit == -1.0
+    obj = table.update(rep(11.0, 0.5))  # age 1: 1 - exp(-1/4) = 0.221 < 0.4: logit 0 -> 1.5
+    a = math.exp(-1.0 / 3.0)
+    assert obj.class_logit == pytest.approx(-1.0 * a + 1.5 * (1.0 - a), abs=1e-12)
+    prev = obj.class_logit
+    obj = table.update(rep(18.0, 0.5))  # age 8: weight 1 - exp(-2) = 0.8647
+    w = 1.0 - math.exp(-2.0)
+    a = math.exp(-7.0 / 3.0)
+    assert obj.class_logit == pytest.approx(prev * a + (-1.0 + 1.0 / w) * (1.0 - a), abs=1e-12)
+    # a report far beyond the clip is clipped after the reading
+    obj = table.update(rep(18.5, 0.99))
+    assert obj.class_logit <= cfg.class_clip
+    # off: the first report's logit is the history, taken as it is
+    plain = ObjectTable(
+        dataclasses.replace(cfg, class_prior_logit=None),
+        FixedRadarR((1.0, 0.0, 0.0, 1.0, 0.0, 1.0)),
+    )
+    assert plain.update(rep(10.0, 0.5)).class_logit == 0.0

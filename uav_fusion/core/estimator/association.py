@@ -6,7 +6,14 @@ tracking is an extension, not a rewrite) and a *UAV score* per object, a sum of 
 terms from independent cues (no single cue decides; the radar's classifier errs both ways):
 
 * class history: exponential moving average (time constant ``class_tau_s``) of the logit of
-  the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``;
+  the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``. With
+  ``class_prior_logit`` set, each report's logit is first read for the radar track's age: a
+  radar classifier has few features on a young track, so its output starts at a prior and
+  moves towards the object's class as features accumulate. A report at age ``a`` (since the
+  object's first report) counts as ``prior + (logit - prior) / w`` with ``w = max(
+  class_min_weight, 1 - exp(-a / class_age_tau_s))`` (the UAV's young track at class
+  probability 0.4 says more than an old one at 0.4), and the history starts at the prior
+  instead of at the first report;
 * kinematics: an object whose mean height (moving average of its reports' ENU up) lies
   below the ground by more than ``below_ground_m``, and by more than ``below_ground_sigmas``
   times the mean vertical standard deviation of its reports (from the radar's polar R: a few
@@ -111,6 +118,11 @@ class ScoreConfig:
     rf_nearest_only: bool = False
     challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
     challenge_margin: float = 0.5
+    # a young radar track's class output leans to the classifier's prior (module text); None:
+    # every report's logit taken as it is
+    class_prior_logit: float | None = None
+    class_age_tau_s: float = 4.0
+    class_min_weight: float = 0.4
 
 
 
@@ -324,13 +336,22 @@ class ObjectTable:
             if pc > 1.0 - 1e-6:
                 pc = 1.0 - 1e-6
             lg = math.log(pc / (1.0 - pc))
+            prior = cfg.class_prior_logit
+            if prior is not None:
+                # the report's distance from the prior, for the track's age
+                w = 1.0 - math.exp(-(t - obj.first_t) / cfg.class_age_tau_s)
+                if w < cfg.class_min_weight:
+                    w = cfg.class_min_weight
+                lg = prior + (lg - prior) / w
             if c < lg:
                 lg = c
             if -c > lg:
                 lg = -c
-            if n_reports == 0:
+            if n_reports == 0 and prior is None:
                 obj.class_logit = lg
             else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
+                if n_reports == 0:  # the history starts at the prior
+                    obj.class_logit = prior  # type: ignore[assignment]
                 tau = cfg.class_tau_s
                 if tau <= 0:
                     obj.class_logit = lg

@@ -122,6 +122,8 @@ class MultiSettings:
     flat_below_ground: bool = True  # a report below the ground updates east / north only
     birth_sep_m: float | None = 60.0  # a strong object inside a track's gate starts a track
     # when that track took another report of the frame this far away (None: never)
+    class_by_age: bool = False  # the profile's class_prior_logit reading of young radar
+    # tracks (off: on the multi-UAV tune halves it added false tracks and ID switches)
 
 
 class UavTrack:
@@ -184,6 +186,8 @@ class MultiTracker:
         self.profile = profile
         self.settings = settings or MultiSettings()
         self.cfg = profile.score
+        if not self.settings.class_by_age and self.cfg.class_prior_logit is not None:
+            self.cfg = replace(self.cfg, class_prior_logit=None)
         self.radar_r = radar_model_from_profile(profile, site)
         self._align = alignment_from_profile(profile, site)
         self.rf_r = rf_model_from_profile(profile)

@@ -443,10 +443,19 @@ def _validate_tracker(p: Profile, where: str) -> None:
             "large_rcs_dbsm",
             "vehicle_min_rcs_dbsm",
             "skip_radar_coasts",
+            "class_prior_logit",
         ):
             continue
         if not v >= 0:
             raise ConfigError(f"{where}: association.{key} must be >= 0, got {v}")
+    if not 0.0 < sc.class_min_weight <= 1.0:
+        raise ConfigError(
+            f"{where}: association.class_min_weight must be in (0, 1], got {sc.class_min_weight}"
+        )
+    if not sc.class_age_tau_s > 0.0:
+        raise ConfigError(
+            f"{where}: association.class_age_tau_s must be > 0, got {sc.class_age_tau_s}"
+        )
 
 
 def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
@@ -657,6 +666,8 @@ def _tracker_fields(
                     if not isinstance(v, int) or isinstance(v, bool):
                         raise ConfigError(f"{where}: association.{key} must be an integer")
                     vals[key] = v
+                elif key == "class_prior_logit":
+                    vals[key] = _opt_float(assoc, key, f"{where}: association", None)
                 elif isinstance(getattr(defaults, key), bool):
                     v = assoc[key]
                     if not isinstance(v, bool):
