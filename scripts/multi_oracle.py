@@ -42,7 +42,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
 from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.bench.multi import (
@@ -53,7 +52,7 @@ from uav_fusion.core.bench.multi import (
     pool_multi,
 )
 from uav_fusion.core.estimator.association import RadarObject
-from uav_fusion.core.estimator.components import MofN, scale_packed
+from uav_fusion.core.estimator.components import scale_packed
 from uav_fusion.core.estimator.kalman import PackedR
 from uav_fusion.core.estimator.multi import (
     MultiSettings,
@@ -71,8 +70,6 @@ from uav_fusion.resources import DEFAULT_SITE, config_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from multi_false_tracks import KindsByTrack, kind_at, labelled_flights
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def vehicle_links(folder: Path) -> tuple[dict[int, str], dict[str, str]]:
@@ -114,10 +111,8 @@ class LabelOracle(MultiTracker):
         tr = self.own.get(vehicle)
         return tr if tr is not None and tr in self.tracks else None
 
-    def _start(
-        self, vehicle: str, t: float, x: list[float], P: FloatArray, confirmed: bool
-    ) -> UavTrack:
-        tr = self._new_track(t, x, P, confirmed)
+    def _own(self, vehicle: str, tr: UavTrack) -> UavTrack:
+        """``tr`` is ``vehicle``'s track, under the vehicle's id."""
         tr.id = self.ids[vehicle]
         self.own[vehicle] = tr
         return tr
@@ -164,7 +159,7 @@ class LabelOracle(MultiTracker):
                     self._drop(tr, "superseded")
                 obj, _, z, far = cands[0]
                 x0, P0 = object_start(obj, self.profile, far or len(z) == 2)
-                tr = self._start(vehicle, t, x0, P0, confirmed=True)
+                tr = self._own(vehicle, self._new_track(t, x0, P0, confirmed=True))
                 tr.last_radar_t = t
                 continue
             scored = []
@@ -197,19 +192,8 @@ class LabelOracle(MultiTracker):
         r = self.rf_r.r_for(att.cep, att.valid_sensors)
         z = (att.e, att.n)
         tr = self._track_of(vehicle)
-        if tr is None:
-            # as the tracker: an RF start is tentative, confirmed by M of N fixes
-            p = self.profile
-            P = np.zeros((6, 6))
-            P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
-            P[2, 2] = p.rf_init_altitude_std_m**2
-            P[3, 3] = P[4, 4] = P[5, 5] = p.init_velocity_std_mps**2
-            tentative = p.confirm_m > 1
-            tr = self._start(
-                vehicle, t, [z[0], z[1], p.rf_init_altitude_m, 0.0, 0.0, 0.0], P, not tentative
-            )
-            if tentative:
-                tr.mofn = MofN(p.confirm_m, p.confirm_n)
+        if tr is None:  # as the tracker: an RF start is tentative, confirmed by M of N fixes
+            self._own(vehicle, self._rf_start(t, z, r))
             return
         self._rf_to(tr, t, z, r)
 

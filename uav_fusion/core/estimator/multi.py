@@ -553,6 +553,12 @@ class MultiTracker:
         if own:
             self._rf_to(min(own, key=lambda x: x.id), t, z, r)
             return
+        tr = self._rf_start(t, z, r)
+        tr.emitter = em
+
+    def _rf_start(self, t: float, z: tuple[float, float], r: PackedR) -> UavTrack:
+        """A new track from an RF fix: at the fix, with the RF start's height prior, at rest
+        (the profile's velocity sigma); tentative (M of N) when the profile asks for it."""
         p = self.profile
         P = np.zeros((6, 6))
         P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
@@ -560,9 +566,9 @@ class MultiTracker:
         P[3, 3] = P[4, 4] = P[5, 5] = p.init_velocity_std_mps**2
         tentative = p.confirm_m > 1
         tr = self._new_track(t, [z[0], z[1], p.rf_init_altitude_m, 0.0, 0.0, 0.0], P, not tentative)
-        tr.emitter = em
         if tentative:
             tr.mofn = MofN(p.confirm_m, p.confirm_n)
+        return tr
 
     def _rf_to(self, tr: UavTrack, t: float, z: tuple[float, float], r: PackedR) -> None:
         f = tr.filter
