@@ -4,6 +4,9 @@ Built from the single-UAV tracker's parts (:mod:`~uav_fusion.core.estimator.trac
 profile's motion filter, measurement models, robust weight, NIS gate, deleter and M-of-N
 confirmation, and the radar object table with its UAV score
 (:mod:`~uav_fusion.core.estimator.association`), which already follows every radar object.
+The score reads each report's class as it is: the profile's reading of a young radar track's
+class for its age (``association.class_prior_logit``) is the single-UAV tracker's unless
+``MultiSettings.class_by_age`` (docs/estimator.md, "A young radar track's class").
 
 Per radar frame (one time for all reports):
 
