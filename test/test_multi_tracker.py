@@ -569,3 +569,29 @@ def test_the_class_read_for_age_is_the_single_uav_trackers_unless_asked_for(site
     assert MultiTracker(p, site).cfg.class_prior_logit is None
     on = MultiTracker(p, site, MultiSettings(class_by_age=True))
     assert on.cfg.class_prior_logit == -1.0 and on.objects.cfg.class_prior_logit == -1.0
+
+
+def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site: Site) -> None:
+    """A silent UAV seen from its take-off gets its track after 4 s of radar reports (it
+    moves: `early_birth_age_s`, `early_birth_speed_mps`), not after the 8 s the stationary
+    cue needs; a reflector the radar classes as a UAV just as often, standing still, gets
+    none either way."""
+    path = _flight(np.array([-200.0, 300.0, 0.0]), 10.0, np.array([8.0, 0.0, 0.0]))
+    uav = Uav(path, 10, seen=lambda tau: tau >= 10.0)
+    mast = np.array([150.0, 350.0, 30.0])
+    reflector = Uav(lambda tau: mast.copy(), 99)
+    stream = scene_stream(site, [uav, reflector], 60.0, 7)
+    firsts = {}
+    for early in (4.0, None):
+        settings = MultiSettings(early_birth_age_s=early)
+        epochs = run_multi(MultiTracker(load_profile("tracker"), site, settings), stream,
+                           4.0, 1000.0, 1059.75)  # fmt: skip
+        on_uav = [ep.t - 1000.0 for ep in epochs if _near(site, ep, path)]
+        assert on_uav
+        firsts[early] = on_uav[0]
+        r0 = np.array(site.radar.enu, dtype=float)
+        assert not any(
+            np.linalg.norm(o.x[:3] - (r0 + mast)) < 30.0 for ep in epochs for o in ep.tracks
+        )
+    assert MultiSettings().early_birth_age_s == 4.0
+    assert firsts[4.0] <= 15.0 and firsts[None] - firsts[4.0] >= 3.0  # 14.0 and 18.0 s

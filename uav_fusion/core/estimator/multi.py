@@ -31,9 +31,10 @@ Per radar frame (one time for all reports):
    outside its gate counts a rejection (``max_consecutive_rejections`` drop it);
 4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
    ``init_min_reports`` reports), has been seen for ``birth_age_s`` (default: the score's
-   ``stationary_min_age_s``, so that the stationary-clutter cue has had its chance) or has RF
-   support, and lies outside the gate of every track starts a new confirmed track from its
-   object's state;
+   ``stationary_min_age_s``, so that the stationary-clutter cue has had its chance), or for
+   ``early_birth_age_s`` while its mean speed is at least ``early_birth_speed_mps`` (it is
+   not standing still, so that cue has nothing to say), or has RF support, and lies outside
+   the gate of every track starts a new confirmed track from its object's state;
 5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
    for ``merge_s`` are one UAV, unless both were updated within ``merge_s`` by different
    radar objects (two UAVs passing each other): the younger is dropped.
@@ -125,6 +126,9 @@ class MultiSettings:
     flat_below_ground: bool = True  # a report below the ground updates east / north only
     birth_sep_m: float | None = 60.0  # a strong object inside a track's gate starts a track
     # when that track took another report of the frame this far away (None: never)
+    early_birth_age_s: float | None = 4.0  # an object moving at early_birth_speed_mps or
+    early_birth_speed_mps: float = 3.0  # more (mean speed) may start a track from this age
+    # (None: only from birth_age_s, or with RF support)
     class_by_age: bool = False  # the profile's class_prior_logit reading of young radar
     # tracks (off: on the multi-UAV tune halves it added false tracks and ID switches)
 
@@ -426,7 +430,15 @@ class MultiTracker:
             far = b in far_cands
             if len(z) != 3 and not far:  # below the ground: no birth
                 continue
-            if obj.age_s < birth_age and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0:
+            if (
+                obj.age_s < birth_age
+                and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0
+                and not (
+                    self.settings.early_birth_age_s is not None
+                    and obj.age_s >= self.settings.early_birth_age_s
+                    and obj.speed >= self.settings.early_birth_speed_mps
+                )
+            ):
                 continue
             if any(
                 nis_rows[a][b] <= g3 and not self._apart(a, b, took, cands)
