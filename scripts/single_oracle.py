@@ -44,7 +44,6 @@ import numpy.typing as npt
 from uav_fusion.core.bench.cache import read_labels
 from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.bench.run import ScoreTask, score_task
-from uav_fusion.core.dataset import load_flight
 from uav_fusion.core.estimator.multi import MultiSettings, run_multi
 from uav_fusion.core.estimator.profile import load_profile
 from uav_fusion.core.estimator.runner import tracker_stream
@@ -143,7 +142,6 @@ def main(argv: list[str] | None = None) -> int:
         definition, args.split, Path(args.cache), site, site_file
     ):
         ours = score_task(ScoreTask(cf, profile, site, definition.grid_hz, settings)).samples
-        flight = load_flight(cf.folder, site)
         truth = FlightTruth.from_flight(flight, site)
         objects, emitters = vehicle_links(cf.folder)
         oracle = LabelOracle(

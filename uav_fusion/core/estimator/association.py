@@ -347,11 +347,9 @@ class ObjectTable:
                 lg = c
             if -c > lg:
                 lg = -c
-            if n_reports == 0 and prior is None:
-                obj.class_logit = lg
+            if n_reports == 0:  # with a prior (and a history) the history starts there
+                obj.class_logit = lg if prior is None or cfg.class_tau_s <= 0 else prior
             else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
-                if n_reports == 0:  # the history starts at the prior
-                    obj.class_logit = prior  # type: ignore[assignment]
                 tau = cfg.class_tau_s
                 if tau <= 0:
                     obj.class_logit = lg
