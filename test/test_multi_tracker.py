@@ -563,12 +563,13 @@ def test_beyond_the_range_gate_tracks_are_updated_and_born_horizontally(site: Si
     assert sum(1 for ep in near if ep.tracks and high(ep.t - 1000.0)) < 10
 
 
-def test_the_class_read_for_age_is_the_single_uav_trackers_unless_asked_for(site: Site) -> None:
+def test_the_class_read_for_age_is_the_single_uav_trackers_unless_turned_off(site: Site) -> None:
     p = load_profile("tracker")
     assert p.score.class_prior_logit == -1.0
-    assert MultiTracker(p, site).cfg.class_prior_logit is None
-    on = MultiTracker(p, site, MultiSettings(class_by_age=True))
+    on = MultiTracker(p, site)
     assert on.cfg.class_prior_logit == -1.0 and on.objects.cfg.class_prior_logit == -1.0
+    off = MultiTracker(p, site, MultiSettings(class_by_age=False))
+    assert off.cfg.class_prior_logit is None and off.objects.cfg.class_prior_logit is None
 
 
 def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site: Site) -> None:

@@ -4,9 +4,9 @@ Built from the single-UAV tracker's parts (:mod:`~uav_fusion.core.estimator.trac
 profile's motion filter, measurement models, robust weight, NIS gate, deleter and M-of-N
 confirmation, and the radar object table with its UAV score
 (:mod:`~uav_fusion.core.estimator.association`), which already follows every radar object.
-The score reads each report's class as it is: the profile's reading of a young radar track's
-class for its age (``association.class_prior_logit``) is the single-UAV tracker's unless
-``MultiSettings.class_by_age`` (docs/estimator.md, "A young radar track's class").
+The score reads a young radar track's class for its age as the single-UAV tracker does (the
+profile's ``association.class_prior_logit``; ``MultiSettings.class_by_age`` False reads each
+report's class as it is; docs/estimator.md, "A young radar track's class").
 
 Per radar frame (one time for all reports):
 
@@ -129,8 +129,8 @@ class MultiSettings:
     early_birth_age_s: float | None = 4.0  # an object moving at early_birth_speed_mps or
     early_birth_speed_mps: float = 3.0  # more (mean speed) may start a track from this age
     # (None: only from birth_age_s, or with RF support)
-    class_by_age: bool = False  # the profile's class_prior_logit reading of young radar
-    # tracks (off: on the multi-UAV tune halves it added false tracks and ID switches)
+    class_by_age: bool = True  # the profile's class_prior_logit reading of young radar
+    # tracks (False: each report's class as it is)
 
 
 class UavTrack:
