@@ -395,6 +395,39 @@ def test_the_large_rcs_term_needs_an_rcs(site: Site) -> None:
     assert not table.objects[4].rcs_seen
 
 
+def test_a_coasted_report_leaves_the_objects_filter_where_it_was(site: Site) -> None:
+    """A report repeating its radar track's velocity and RCS is the radar's prediction: with
+    ``skip_radar_coasts`` the object's filter does not take it, the next real report is
+    predicted over the whole gap, and an RF fix meets the filter's state at its own time."""
+    r0 = np.array(site.radar.enu, dtype=float)
+    vel = (0.0, 6.0, 0.0)  # NED: 6 m/s east
+
+    def report(t: float, east: float, rcs: float) -> RadarTrack:
+        e, n, u = map(float, r0 + np.array([east, 300.0, 40.0]))
+        return RadarTrack(t, 5, 0.0, 0.0, 0.0, e, n, u, vel, 0.6, None, rcs)
+
+    tables = {}
+    for skip in (True, False):
+        cfg = ScoreConfig(skip_radar_coasts=skip)
+        table = ObjectTable(cfg, FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
+        for k in range(40):  # 10 s of real reports along the track
+            table.update(report(0.25 * k, 200.0 + 1.5 * k, -10.0 - 0.01 * k))
+        obj = table.objects[5]
+        x_before = list(obj.kf.x)
+        for k in range(40, 56):  # 4 s of coasts: a report 40 m off, velocity and RCS repeated
+            table.update(report(0.25 * k, 260.0 + 40.0, -10.39))
+        assert obj.coasting and obj.last_t == pytest.approx(13.75)
+        tables[skip] = (table, obj, x_before)
+    table, obj, x_before = tables[True]
+    assert obj.kf.x == x_before and obj.kf_t == pytest.approx(9.75)
+    # a fine RF fix where the object's own motion puts it at 14 s is credited
+    e14, n14 = map(float, r0[:2] + np.array([200.0 + 6.0 * 14.0, 300.0]))
+    assert table.rf_fix(14.0, e14, n14, 4.0) == 1
+    # without skip_radar_coasts the coasts pull the filter towards the coasted position
+    _, obj_all, _ = tables[False]
+    assert obj_all.kf_t == pytest.approx(13.75) and obj_all.kf.x[0] > x_before[0] + 20.0
+
+
 def test_a_low_class_probability_uav_with_rf_agreement_is_kept(site: Site) -> None:
     sc = Scene(site, seed=2)
     sc.build(200.0, uav_prob=lambda t: 0.3, clutter=True)

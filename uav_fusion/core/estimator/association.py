@@ -58,7 +58,8 @@ A *coasted* report is one whose velocity and RCS repeat the same radar track's p
 exactly: the radar's own tracker had no detection for it and reported its prediction
 (:attr:`RadarObject.coasting`). It carries no new measurement; with ``skip_radar_coasts`` the
 fused track does not take it (it would count the radar's prediction as a fresh measurement
-with independent noise).
+with independent noise), and neither does the object's own filter (its state then stays at
+its last report that was not a coast, :attr:`RadarObject.kf_t`).
 """
 
 from __future__ import annotations
@@ -150,6 +151,7 @@ class RadarObject:
         "fused_t",
         "id",
         "kf",
+        "kf_t",
         "last_t",
         "n_reports",
         "nis_mean",
@@ -169,6 +171,7 @@ class RadarObject:
         self.last_t = t
         self.n_reports = 0
         self.kf: CvKalman | None = None
+        self.kf_t = t  # the time of the filter's state (its last non-coasted report)
         self.class_logit = 0.0
         self.speed = 0.0
         self.up = 0.0
@@ -273,6 +276,10 @@ class ObjectTable:
         kf = obj.kf
         n_reports = obj.n_reports
         rcs = trk.rcs_dbsm
+        vel = trk.vel_ned
+        sig = (vel, rcs)
+        old = obj.signature
+        coast = old is not None and vel is not None and sig == old
         if kf is None or dt < 0:
             q = cfg.object_q
             kf = obj.kf = CvKalman((q, q, q))
@@ -287,6 +294,7 @@ class ObjectTable:
                 v,
             ]  # fmt: skip
             dt = 0.0
+            obj.kf_t = t
             obj.up = u
             obj.sd_up = math.sqrt(r[5])
             if rcs is not None and math.isfinite(rcs):
@@ -302,11 +310,13 @@ class ObjectTable:
             tau = cfg.speed_tau_s
             a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
             b = 1.0 - a
-            nis = kf.predict_update3(dt, e, n, u, r)
-            if math.isfinite(nis):
-                # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
-                obj.nis_mean = a * obj.nis_mean + b * (100.0 if nis > 100.0 else nis)
-        vel = trk.vel_ned
+            if not (coast and cfg.skip_radar_coasts):
+                # a coast is the radar's own prediction: no new measurement for the filter
+                nis = kf.predict_update3(t - obj.kf_t, e, n, u, r)
+                obj.kf_t = t
+                if math.isfinite(nis):
+                    # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
+                    obj.nis_mean = a * obj.nis_mean + b * (100.0 if nis > 100.0 else nis)
         if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
             vn, ve, vd = vel
             spd = math.sqrt(vn * vn + ve * ve + vd * vd)
@@ -356,9 +366,7 @@ class ObjectTable:
                 else:
                     a = math.exp(-dt / tau) if dt > 0 else 1.0
                     obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
-        sig = (vel, rcs)
-        old = obj.signature
-        obj.coasting = old is not None and vel is not None and sig == old
+        obj.coasting = coast
         obj.signature = sig
         obj.n_reports = n_reports + 1
         obj.last_t = t
@@ -387,10 +395,10 @@ class ObjectTable:
         hits = 0
         best: tuple[float, RadarObject] | None = None
         for obj in self.objects.values():
-            dt = t - obj.last_t
             kf = obj.kf
-            if kf is None or abs(dt) > cfg.rf_window_s:
+            if kf is None or abs(t - obj.last_t) > cfg.rf_window_s:
                 continue
+            dt = t - obj.kf_t  # from the filter's own time (coasts leave it behind)
             x = kf.x
             p = kf.P
             de = e - (x[0] + dt * x[3])
