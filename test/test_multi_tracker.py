@@ -485,6 +485,32 @@ def test_reports_below_the_ground_still_place_the_uav(site: Site) -> None:
         assert o.x[2] > r0[2] - 20.0
 
 
+def test_a_far_uav_the_radar_puts_under_the_ground_is_born_but_a_near_mirror_image_is_not(
+    site: Site,
+) -> None:
+    """Far out at a low angle the radar's elevation is poor: a silent UAV 700 m out whose
+    reports all sit 30 m under the ground (well within their vertical sigma) gets a track,
+    started on east / north at the height prior; 150 m from the radar, where the vertical
+    sigma is a few metres, reports as far under the ground are a mirror image: no track."""
+    r0 = np.array(site.radar.enu, dtype=float)
+    for start, born in (((-650.0, 300.0), True), ((-100.0, 120.0), False)):
+        path = _flight(np.array([*start, 0.0]), 0.0, np.array([0.0, 3.0, 0.0]))
+        uav = Uav(path, 33, seen=lambda tau: tau >= 10.0, below_ground=lambda tau: True)
+        epochs = run_multi(
+            MultiTracker(load_profile("tracker"), site), scene_stream(site, [uav], 70.0, 4),
+            1.0, 1000.0, 1069.0,
+        )  # fmt: skip
+        if not born:
+            assert not any(ep.tracks for ep in epochs)
+            continue
+        late = epochs[30:]
+        assert all(len(ep.tracks) == 1 for ep in late)
+        for ep in late:
+            o = ep.tracks[0]
+            assert np.linalg.norm(o.x[:2] - (r0 + path(ep.t - 1000.0))[:2]) < 40.0
+            assert o.x[2] > r0[2]  # the height prior, not the reports' -30 m
+
+
 def test_an_emitter_whose_fixes_keep_missing_its_track_moves_to_the_right_one(
     site: Site,
 ) -> None:

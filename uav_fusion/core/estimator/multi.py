@@ -34,7 +34,10 @@ Per radar frame (one time for all reports):
    ``stationary_min_age_s``, so that the stationary-clutter cue has had its chance), or for
    ``early_birth_age_s`` while its mean speed is at least ``early_birth_speed_mps`` (it is
    not standing still, so that cue has nothing to say), or has RF support, and lies outside
-   the gate of every track starts a new confirmed track from its object's state;
+   the gate of every track starts a new confirmed track from its object's state (a report
+   beyond the range gate, or under the ground and so used on east / north only, starts it
+   at the RF start's height prior; one under the ground whose object is a ghost, its mean
+   height clearly below the ground, starts none);
 5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
    for ``merge_s`` are one UAV, unless both were updated within ``merge_s`` by different
    radar objects (two UAVs passing each other): the younger is dropped.
@@ -428,7 +431,8 @@ class MultiTracker:
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
                 continue
             far = b in far_cands
-            if len(z) != 3 and not far:  # below the ground: no birth
+            flat_start = far or len(z) != 3
+            if len(z) != 3 and not far and obj.below_ground(cfg):  # a ghost: no birth
                 continue
             if (
                 obj.age_s < birth_age
@@ -445,7 +449,7 @@ class MultiTracker:
                 for a in range(len(live))
             ):
                 continue
-            x0, P0 = object_start(obj, self.profile, far)
+            x0, P0 = object_start(obj, self.profile, flat_start)
             tr = self._new_track(t, x0, P0, confirmed=True)
             tr.followed = trk.track_id
             tr.last_radar_t = t
