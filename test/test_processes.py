@@ -97,7 +97,9 @@ def test_separate_processes_equal_the_offline_run(ctx: Context, tmp_path: Path) 
     procs = Procs(tmp_path)
     fd = f"flight_dir:={flight_dir}"
     try:
-        procs.start("fusion_node", "use_sim_time:=true", "reorder_window_s:=3.0")
+        # a window of 15 s of flight (3 s of wall time at rate 5): a follower process the machine
+        # holds up for a moment must not lose a message to it
+        procs.start("fusion_node", "use_sim_time:=true", "reorder_window_s:=15.0")
         procs.start("radar_replay", fd, "use_sim_time:=true", "publish_raw:=false")
         procs.start("rf_replay", fd, "use_sim_time:=true")
         # start the clock only once the followers are matched with the fusion node
