@@ -431,8 +431,8 @@ class MultiTracker:
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
                 continue
             far = b in far_cands
-            flat_start = far or len(z) != 3
-            if len(z) != 3 and not far and obj.below_ground(cfg):  # a ghost: no birth
+            flat_start = far or len(z) != 3  # no usable height: start at the height prior
+            if flat_start and not far and obj.below_ground(cfg):  # a ghost: no birth
                 continue
             if (
                 obj.age_s < birth_age
