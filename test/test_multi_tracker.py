@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
-from uav_fusion.core.estimator import load_profile
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.estimator import load_profile, profile_from_dict
 from uav_fusion.core.estimator.multi import (
     UNKNOWN_EMITTER,
     GridEpoch,
@@ -622,3 +624,63 @@ def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site:
         )
     assert MultiSettings().early_birth_age_s == 4.0
     assert firsts[4.0] <= 15.0 and firsts[None] - firsts[4.0] >= 3.0  # 14.0 and 18.0 s
+
+
+def test_the_profiles_multi_section_sets_the_tracker(site: Site, tmp_path: Path) -> None:
+    """A profile file's ``multi`` section reaches a tracker built from the profile alone: the
+    silent moving UAV of the early-birth case is born later with ``early_birth_age_s: null``
+    in the file, as with the same setting passed in code; the shipped tracker profile spells
+    out the defaults it was measured with."""
+    shipped = load_profile("tracker")
+    assert shipped.multi == MultiSettings()
+    path = _flight(np.array([-200.0, 300.0, 0.0]), 10.0, np.array([8.0, 0.0, 0.0]))
+    stream = scene_stream(site, [Uav(path, 10, seen=lambda tau: tau >= 10.0)], 40.0, 7)
+    doc = shipped.as_dict()
+    doc["multi"] = {"early_birth_age_s": None}
+    f = tmp_path / "late_births.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    late = load_profile(f)
+    assert late.multi.early_birth_age_s is None and late.multi.merge_s == 3.0
+
+    def first_on_uav(tracker: MultiTracker) -> float:
+        epochs = run_multi(tracker, stream, 4.0, 1000.0, 1039.75)
+        return next(ep.t - 1000.0 for ep in epochs if _near(site, ep, path))
+
+    from_file = first_on_uav(MultiTracker(late, site))
+    in_code = first_on_uav(MultiTracker(shipped, site, MultiSettings(early_birth_age_s=None)))
+    default = first_on_uav(MultiTracker(shipped, site))
+    assert from_file == in_code and from_file - default >= 3.0
+
+
+@pytest.mark.parametrize(
+    ("multi", "message"),
+    [
+        ({"merge_s": -1.0}, "multi.merge_s must be a number >= 0, got -1.0"),
+        ({"merge_nis": 0}, "multi.merge_nis must be a number > 0"),
+        ({"emitter_doubt": 1.5}, r"multi.emitter_doubt must be a number in \[0, 1\]"),
+        ({"emitter_misses": 0}, "multi.emitter_misses must be an integer >= 1 or null"),
+        ({"emitter_misses": 2.5}, "multi.emitter_misses must be an integer"),
+        ({"class_by_age": "yes"}, "multi.class_by_age must be true or false, got 'yes'"),
+        ({"velocity_sigma_mps": None}, "multi.velocity_sigma_mps must be a number > 0, got None"),
+        ({"output_coast_s": float("nan")}, "multi.output_coast_s must be a number >= 0 or null"),
+        ({"birth_gap_s": 3.0}, "unknown key 'multi.birth_gap_s'"),
+    ],
+)
+def test_a_bad_multi_key_stops_naming_the_file_and_key(
+    tmp_path: Path, multi: dict[str, object], message: str
+) -> None:
+    doc = load_profile("tracker").as_dict()
+    doc["multi"] = multi
+    f = tmp_path / "bad_multi.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=message) as exc:
+        load_profile(f)
+    assert str(f) in str(exc.value)
+
+
+def test_a_profile_round_trips_its_multi_section() -> None:
+    p = load_profile("tracker")
+    changed = dataclasses.replace(p.multi, merge_s=5.0, emitter_misses=None, class_by_age=False)
+    doc = dataclasses.replace(p, multi=changed).as_dict()
+    assert profile_from_dict(doc).multi == changed
+    assert "multi" not in load_profile("paper").as_dict()  # the paper's profile as it was

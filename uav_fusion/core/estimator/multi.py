@@ -7,6 +7,9 @@ confirmation, and the radar object table with its UAV score
 The score reads a young radar track's class for its age as the single-UAV tracker does (the
 profile's ``association.class_prior_logit``; ``MultiSettings.class_by_age`` False reads each
 report's class as it is; docs/estimator.md, "A young radar track's class").
+Its own settings (:class:`~uav_fusion.core.estimator.multi_settings.MultiSettings`) are the
+profile's ``multi`` section (``config/profiles/README.md``, "Multi-UAV keys"); a ``settings``
+argument given to :class:`MultiTracker` replaces them.
 
 Per radar frame (one time for all reports):
 
@@ -78,6 +81,7 @@ from uav_fusion.core.estimator.association import ObjectTable, RadarObject
 from uav_fusion.core.estimator.components import Deleter, MofN, PolarRadarR, scale_packed
 from uav_fusion.core.estimator.filters import MotionFilter
 from uav_fusion.core.estimator.kalman import PackedR, expand_upper
+from uav_fusion.core.estimator.multi_settings import MultiSettings
 from uav_fusion.core.estimator.profile import Profile
 from uav_fusion.core.estimator.track import nis_gate
 from uav_fusion.core.estimator.tracker import (
@@ -107,33 +111,6 @@ def emitter_key(freq_hz: float | None) -> str:
     if freq_hz is None or not math.isfinite(freq_hz):
         return UNKNOWN_EMITTER
     return f"{round(freq_hz / 1e3):d}kHz"
-
-
-@dataclass(frozen=True)
-class MultiSettings:
-    """What the multi-UAV tracker adds to a tracker profile."""
-
-    merge_nis: float = 3.0  # two tracks this close (NIS, 3 dof) are candidates for a merge
-    merge_s: float = 3.0  # ... and are merged after this long
-    emitter_doubt: float = 0.1  # 1 - P(UAV) is multiplied by this for a track with an emitter
-    birth_age_s: float | None = None  # None: the score's stationary_min_age_s
-    continuity_bonus: float = 0.0  # NIS credit for the radar object a track took last
-    velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
-    velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
-    output_coast_s: float | None = 3.0  # published while the last update is this recent
-    radar_output_s: float | None = 3.0  # inside radar cover: ... and the last radar update
-    emitter_misses: int | None = 3  # this many fixes of its emitter in a row outside a
-    # track's gate unlink the emitter from it (None: never)
-    tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
-    merge_keeps_live: bool = True  # a merge keeps the recently updated track over the older
-    flat_below_ground: bool = True  # a report below the ground updates east / north only
-    birth_sep_m: float | None = 60.0  # a strong object inside a track's gate starts a track
-    # when that track took another report of the frame this far away (None: never)
-    early_birth_age_s: float | None = 4.0  # an object moving at early_birth_speed_mps or
-    early_birth_speed_mps: float = 3.0  # more (mean speed) may start a track from this age
-    # (None: only from birth_age_s, or with RF support)
-    class_by_age: bool = True  # the profile's class_prior_logit reading of young radar
-    # tracks (False: each report's class as it is)
 
 
 class UavTrack:
@@ -194,7 +171,7 @@ class MultiTracker:
 
     def __init__(self, profile: Profile, site: Site, settings: MultiSettings | None = None) -> None:
         self.profile = profile
-        self.settings = settings or MultiSettings()
+        self.settings = settings or profile.multi
         self.cfg = profile.score
         if not self.settings.class_by_age and self.cfg.class_prior_logit is not None:
             self.cfg = replace(self.cfg, class_prior_logit=None)

@@ -17,6 +17,11 @@ import numpy.typing as npt
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimator.association import ScoreConfig, score_keys
 from uav_fusion.core.estimator.components import validate_transition
+from uav_fusion.core.estimator.multi_settings import (
+    MultiSettings,
+    multi_keys,
+    multi_settings_from_dict,
+)
 from uav_fusion.core.radar_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.yamlio import read_yaml_file
@@ -97,6 +102,8 @@ class Profile:
     association: str | None = None  # None: radar_selection (paper); "track_score": tracker
     score: ScoreConfig = field(default_factory=ScoreConfig)
     smoother_lag_s: float | None = None  # fixed-lag smoothing of the tracker's steps
+    # the multi-UAV tracker's own settings (the ``multi`` section; multi_settings.py)
+    multi: MultiSettings = field(default_factory=MultiSettings)
     source: Path | None = field(default=None, compare=False)
 
     @property
@@ -190,6 +197,8 @@ class Profile:
             d["association"] = {"mode": "track_score", **asdict(self.score)}
             del d["radar_selection"]
             d["smoother"] = {"lag_s": self.smoother_lag_s}
+        if self.uses_tracker or self.multi != MultiSettings():
+            out["multi"] = asdict(self.multi)
         return out
 
 
@@ -207,6 +216,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
         "update",
         "association",
         "smoother",
+        "multi",
     ),
     "motion": ("model", "q", "imm"),
     "motion.imm": ("q", "transition", "initial"),
@@ -230,6 +240,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
     ),
     "association": ("mode", *score_keys()),
     "smoother": ("lag_s",),
+    "multi": multi_keys(),
     "gating": ("range_gate_m", "far_gate_m", "nis_probability", "min_uav_prob"),
     "sources": (RADAR, RF),
     "track": (
@@ -491,6 +502,7 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     update = _section(doc, "update", where)
     assoc = _section(doc, "association", where)
     smoother = _section(doc, "smoother", where)
+    multi = _section(doc, "multi", where)
     imm = _section(motion, "imm", f"{where}: motion")
     for name, sec in (
         ("motion", motion),
@@ -498,6 +510,7 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         ("update", update),
         ("association", assoc),
         ("smoother", smoother),
+        ("multi", multi),
         ("measurement", meas),
         ("measurement.radar", radar),
         ("measurement.rf", rf),
@@ -562,6 +575,7 @@ def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
         description=str(doc.get("description", "") or ""),
         r_note=str(meas.get("note", "") or ""),
         source=source,
+        multi=multi_settings_from_dict(multi, where),
         **extra,
     )
     _validate(p, where)
