@@ -3,7 +3,8 @@
 Runs every task of the spec that has no stored result yet (``results.jsonl`` in the output
 folder, keyed by the task's inputs), saving each result as it finishes; failed tasks are
 listed with their inputs and do not stop the others. Writes ``results.csv`` (one row per task
-of the spec), ``failures.json`` and ``sweep.png`` (the spec's metric against each parameter).
+of the spec), ``failures.json`` and ``sweep.png`` (the spec's metric against each parameter;
+with a multi-UAV definition also ``tradeoff.png``, coverage against false-track time).
 See docs/benchmark.md, "Sweeps".
 """
 
@@ -23,8 +24,10 @@ from uav_fusion.core.bench.sweep import (
     run_sweep_task,
     summary_rows,
     sweep_tasks,
+    tradeoff_rows,
     write_figure,
     write_table,
+    write_tradeoff_figure,
 )
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
@@ -95,6 +98,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"{spec.metric} per profile and parameters (mean, min, max over flights):")
     for prof, label, mean, lo, hi, n in sorted(summary_rows(rows, spec)):
         print(f"  {prof:18s} {label:40s} {mean:9.2f} {lo:9.2f} {hi:9.2f}  ({n} flights)")
+    if spec.definition.multi:
+        print("coverage % / false-track time % / GOSPA m per profile and parameters (means over "
+              "flights):")
+        for prof, label, cov, fal, gospa in tradeoff_rows(rows, spec):
+            print(f"  {prof:18s} {label:40s} {cov:7.2f} {fal:7.2f} {gospa:7.2f}")
     for f in failures:
         print(
             f"FAILED: {f['profile']} {f['params']} on {f['flight']}: {f['error']}"
@@ -102,6 +110,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"results: {table} ({len(rows)} of {len(tasks)} tasks); failures: {len(failures)}")
     if not args.no_figure:
         fig = write_figure(rows, spec, out / "sweep.png")
+        if fig is not None:
+            print(f"figure: {fig}")
+        fig = write_tradeoff_figure(rows, spec, out / "tradeoff.png")
         if fig is not None:
             print(f"figure: {fig}")
     print(f"wall time {time.perf_counter() - wall0:.1f} s")

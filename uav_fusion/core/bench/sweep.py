@@ -15,17 +15,23 @@ A sweep spec (YAML, e.g. ``bench/sweep_q.yaml``) names:
     estimator profiles (names under ``config/profiles/`` or paths relative to the spec);
 ``parameters``
     a mapping from a profile parameter (:data:`PARAMETERS`) to the list of values to try;
-    every combination is run with every profile on every flight;
+    with a multi-UAV definition also ``multi.<key>``, any key of the profile's ``multi``
+    section (:class:`~uav_fusion.core.estimator.multi_settings.MultiSettings`); every
+    combination is run with every profile on every flight;
 ``metric``
     the figure plotted against each parameter (a :class:`~uav_fusion.core.gridscore.GridScore`
-    field, default ``err_mean_m``).
+    field, default ``err_mean_m``; with a multi-UAV definition a
+    :class:`~uav_fusion.core.bench.multi.MultiBenchScore` field, default ``gospa_mean_m``).
 
 Each task (one flight, one profile, one combination) loads the flight from the benchmark's
 cache (generating it if missing), runs the estimator and scores its fixed-rate output with the
-benchmark's metrics (:func:`uav_fusion.core.bench.run.score_task`). Its result is keyed by a
-hash of its inputs (the flight's cache key, the profile file's bytes, the parameter values and
-the scoring settings), so a re-run computes only what is missing. A task that raises is
-reported as a failure row with its inputs and does not stop the others.
+benchmark's metrics (:func:`uav_fusion.core.bench.run.score_task`; a multi-UAV definition's
+flights run the multi-UAV tracker and are scored as a set of targets,
+:func:`uav_fusion.core.bench.multi.multi_score_task`, each flight's figures on their own).
+Its result is keyed by a hash of its inputs (the flight's cache key, the profile file's
+bytes, the parameter values and the scoring settings), so a re-run computes only what is
+missing. A task that raises is reported as a failure row with its inputs and does not stop
+the others.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ import json
 import math
 import time
 import traceback
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -47,8 +53,15 @@ from uav_fusion.core.bench.definition import (
     definition_path,
     load_definition,
 )
+from uav_fusion.core.bench.multi import (
+    MultiBenchScore,
+    MultiScoreTask,
+    multi_score_task,
+    pool_multi,
+)
 from uav_fusion.core.bench.run import ScoreTask, score_task
 from uav_fusion.core.errors import ConfigError, UavFusionError
+from uav_fusion.core.estimator.multi_settings import check_value
 from uav_fusion.core.estimator.profile import Profile, load_profile, profile_path
 from uav_fusion.core.gridscore import GridScore, ScoreSettings, pool
 from uav_fusion.core.site import Site
@@ -86,6 +99,12 @@ PARAMETERS: dict[str, tuple[str, str]] = {
 }
 
 METRICS = tuple(f.name for f in fields(GridScore) if f.name not in ("flights",))
+#: The figures of a multi-UAV definition's tasks (one flight each).
+MULTI_METRICS = tuple(
+    f.name for f in fields(MultiBenchScore) if f.name not in ("profile", "flights", "run_s")
+)
+#: ``multi.<key>``: a key of the profile's multi section (multi-UAV definitions only).
+MULTI_PREFIX = "multi."
 
 
 @dataclass(frozen=True)
@@ -100,6 +119,11 @@ class SweepSpec:
     parameters: dict[str, tuple[Any, ...]]
     metric: str
     source: Path
+
+    @property
+    def metrics(self) -> tuple[str, ...]:
+        """The figures each task gives: the benchmark's, single- or multi-UAV."""
+        return MULTI_METRICS if self.definition.multi else METRICS
 
     def combinations(self) -> list[dict[str, Any]]:
         """Every combination of the parameter values (one empty one without parameters)."""
@@ -199,16 +223,28 @@ def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
     params: dict[str, tuple[Any, ...]] = {}
     for name, values in params_raw.items():
         where = f"{src}: parameters.{name}"
-        if name not in PARAMETERS:
+        multi_key = str(name).startswith(MULTI_PREFIX)
+        if multi_key and not definition.multi:
             raise ConfigError(
-                f"{where}: unknown parameter (allowed: {', '.join(sorted(PARAMETERS))})"
+                f"{where}: a multi-UAV tracker setting needs a multi-UAV definition "
+                f"({definition.source} has targets: {definition.targets})"
+            )
+        if not multi_key and name not in PARAMETERS:
+            raise ConfigError(
+                f"{where}: unknown parameter (allowed: {', '.join(sorted(PARAMETERS))}"
+                + (", multi.<key>)" if definition.multi else ")")
             )
         if not isinstance(values, list) or not values:
             raise ConfigError(f"{where}: a non-empty list of values expected")
-        params[name] = tuple(_convert(name, v, where) for v in values)
-    metric = doc.get("metric", "err_mean_m")
-    if metric not in METRICS:
-        raise ConfigError(f"{src}: metric: one of {', '.join(METRICS)} expected, got {metric!r}")
+        if multi_key:
+            key = str(name)[len(MULTI_PREFIX):]
+            params[name] = tuple(check_value(key, v, f"{src}: parameters") for v in values)
+        else:
+            params[name] = tuple(_convert(name, v, where) for v in values)
+    metrics = MULTI_METRICS if definition.multi else METRICS
+    metric = doc.get("metric", "gospa_mean_m" if definition.multi else "err_mean_m")
+    if metric not in metrics:
+        raise ConfigError(f"{src}: metric: one of {', '.join(metrics)} expected, got {metric!r}")
     spec = SweepSpec(
         name=str(doc.get("name", source.stem)),
         description=str(doc.get("description", "")),
@@ -242,7 +278,13 @@ def apply_parameters(profile: Profile, combo: dict[str, Any]) -> Profile:
     """``profile`` with the combination's values (validated by the profile's own rules)."""
     if not combo:
         return profile
-    return profile.with_changes(**{PARAMETERS[k][0]: v for k, v in combo.items()})
+    changes: dict[str, Any] = {
+        PARAMETERS[k][0]: v for k, v in combo.items() if not k.startswith(MULTI_PREFIX)
+    }
+    multi = {k[len(MULTI_PREFIX):]: v for k, v in combo.items() if k.startswith(MULTI_PREFIX)}
+    if multi:
+        changes["multi"] = replace(profile.multi, **multi)
+    return profile.with_changes(**changes)
 
 
 @dataclass(frozen=True)
@@ -270,7 +312,10 @@ def task_key(
     h.update(flight.folder.name.encode())  # plan, seed and the flight's cache key
     h.update(b"\0profile\0" + profile_file.read_bytes())
     h.update(b"\0params\0" + json.dumps(params, sort_keys=True).encode())
-    h.update(b"\0scoring\0" + repr((definition.grid_hz, definition.settings)).encode())
+    scoring: tuple[object, ...] = (definition.grid_hz, definition.settings)
+    if definition.multi:
+        scoring += ("multi", definition.excuse_grounded)
+    h.update(b"\0scoring\0" + repr(scoring).encode())
     return h.hexdigest()[:20]
 
 
@@ -316,11 +361,22 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
     try:
         generate_flight(task.flight, task.definition, task.site)
         profile = apply_parameters(load_profile(task.profile_path), task.params)
-        result = score_task(
-            ScoreTask(task.flight, profile, task.site, task.grid_hz, task.settings)
-        )
-        score = pool([result.samples], task.settings)
-        row.update({k: v for k, v in asdict(score).items() if k != "flights"})
+        if task.definition.multi:
+            st = task.settings
+            mres = multi_score_task(
+                MultiScoreTask(
+                    task.flight, profile, task.site, task.grid_hz, st.airborne_min_m,
+                    st.observable_window_s, task.definition.excuse_grounded,
+                )
+            )  # fmt: skip
+            mscore = pool_multi([mres])[profile.name]
+            row.update({k: v for k, v in asdict(mscore).items() if k in MULTI_METRICS})
+        else:
+            result = score_task(
+                ScoreTask(task.flight, profile, task.site, task.grid_hz, task.settings)
+            )
+            score = pool([result.samples], task.settings)
+            row.update({k: v for k, v in asdict(score).items() if k != "flights"})
         row["profile"] = profile.name
     except Exception as exc:
         kind = "" if isinstance(exc, UavFusionError) else f"{type(exc).__name__}: "
@@ -392,12 +448,12 @@ def write_table(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Path
     pnames = list(spec.parameters)
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow([*RESULT_COLUMNS, *pnames, *METRICS, "seconds", "key"])
+        w.writerow([*RESULT_COLUMNS, *pnames, *spec.metrics, "seconds", "key"])
         for r in rows:
             w.writerow(
                 [r[c] for c in RESULT_COLUMNS]
                 + [_cell(r["params"].get(p)) for p in pnames]
-                + [_cell(r.get(m)) for m in METRICS]
+                + [_cell(r.get(m)) for m in spec.metrics]
                 + [r.get("seconds", ""), r["key"]]
             )
     return path
@@ -414,6 +470,8 @@ def _cell(v: Any) -> str:
 
 
 def _value_label(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
     if isinstance(v, (list, tuple)):
         return str(v[0]) if len(set(v)) == 1 else "/".join(str(x) for x in v)
     return "null" if v is None else f"{v:g}"
@@ -500,3 +558,68 @@ def _same(a: Any, b: Any) -> bool:
     if isinstance(b, list):
         b = tuple(b)
     return bool(a == b)
+
+
+def _mean_over_flights(rows: list[dict[str, Any]], metric: str) -> float:
+    vals = [float(r[metric]) for r in rows if r.get(metric) is not None
+            and math.isfinite(float(r[metric]))]
+    return sum(vals) / len(vals) if vals else math.nan
+
+
+def tradeoff_rows(
+    rows: list[dict[str, Any]], spec: SweepSpec
+) -> list[tuple[str, str, float, float, float]]:
+    """Multi-UAV sweeps: per profile and combination, the means over the flights of coverage,
+    false-track time and GOSPA: (profile, combination, coverage %, false-track %, GOSPA m)."""
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in rows:
+        label = ", ".join(f"{k}={_value_label(v)}" for k, v in r["params"].items()) or "-"
+        groups.setdefault((r["profile"], label), []).append(r)
+    return [
+        (
+            prof,
+            label,
+            _mean_over_flights(rs, "coverage_pct"),
+            _mean_over_flights(rs, "false_track_pct"),
+            _mean_over_flights(rs, "gospa_mean_m"),
+        )
+        for (prof, label), rs in sorted(groups.items())
+    ]
+
+
+def write_tradeoff_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Path | None:
+    """Multi-UAV sweeps: coverage against false-track time, a point per profile and
+    combination (means over the flights), labelled with the combination and its GOSPA: what
+    a setting buys on one axis and costs on the other."""
+    if not spec.definition.multi or not rows:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = tradeoff_rows(rows, spec)
+    fig, ax = plt.subplots(figsize=(7.5, 5.5))
+    for k, prof in enumerate(sorted({p[0] for p in pts})):
+        mine = [p for p in pts if p[0] == prof]
+        ax.scatter([p[3] for p in mine], [p[2] for p in mine], label=prof,
+                   marker="os^Dv"[k % 5], zorder=3)
+        for _prof, label, cov, fal, gospa in mine:
+            short = label.replace(MULTI_PREFIX, "").replace(", ", "\n")
+            ax.annotate(f"{short}\nGOSPA {gospa:.1f} m", (fal, cov), fontsize=6,
+                        xytext=(4, 3), textcoords="offset points")
+    ax.margins(x=0.3, y=0.15)
+    ax.set_xlabel("false-track time (% of flight time, mean over flights)")
+    if any(k.startswith(MULTI_PREFIX) for k in spec.parameters):
+        ax.text(0.01, 0.01, "labels: multi.<key> settings of the profile", fontsize=7,
+                transform=ax.transAxes)
+    ax.set_ylabel("coverage (% of airborne UAV-epochs, mean over flights)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    n_fl = len({r["flight"] for r in rows})
+    ax.set_title(f"sweep {spec.name}: coverage against false-track time, {n_fl} {spec.split} "
+                 "flights", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
