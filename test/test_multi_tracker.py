@@ -327,13 +327,14 @@ class Uav:
     seen: Callable[[float], bool] = lambda tau: True
     freq_hz: float | None = None  # link on 4 s fixes (all the time: on the pad too)
     below_ground: Callable[[float], bool] = lambda tau: False  # reports mirrored under ground
+    uav_prob: float = 0.8  # the radar's class probability on its reports
 
 
 def scene_stream(
     site: Site, uavs: list[Uav], duration_s: float, seed: int = 0
 ) -> list[RadarFrame | RfAttempt]:
-    """Radar frames at 4 Hz (4 m noise, UAV class probability 0.8) and RF fixes every 4 s
-    (6 m noise, CEP 8 m) of ``uavs``, from t = 1000 s."""
+    """Radar frames at 4 Hz (4 m noise, UAV class probability ``Uav.uav_prob``) and RF fixes
+    every 4 s (6 m noise, CEP 8 m) of ``uavs``, from t = 1000 s."""
     rng = np.random.default_rng(seed)
     r0 = np.array(site.radar.enu, dtype=float)
     items: list[tuple[float, int, RadarFrame | RfAttempt]] = []
@@ -351,7 +352,9 @@ def scene_stream(
             ned = (float(v[1]), float(v[0]), float(-v[2]))
             rcs = round(-10.0 + float(rng.normal(0.0, 2.0)), 3)
             reps.append(
-                RadarTrack(t, u.radar_id, 0.0, 0.0, 0.0, *map(float, p), ned, 0.8, None, rcs)
+                RadarTrack(
+                    t, u.radar_id, 0.0, 0.0, 0.0, *map(float, p), ned, u.uav_prob, None, rcs
+                )
             )
         items.append((t, 0, RadarFrame(t, tuple(reps))))
         for i, u in enumerate(uavs):
@@ -684,3 +687,31 @@ def test_a_profile_round_trips_its_multi_section() -> None:
     doc = dataclasses.replace(p, multi=changed).as_dict()
     assert profile_from_dict(doc).multi == changed
     assert "multi" not in load_profile("paper").as_dict()  # the paper's profile as it was
+
+
+def test_an_emitting_uav_is_followed_where_its_fixes_put_a_radar_track_still_classed_low(
+    site: Site,
+) -> None:
+    """An emitting UAV flies unseen by the radar (its RF track is not published inside radar
+    cover), then a radar track takes it up whose class probability stays at 0.28. After the
+    emitter's first fix credits that radar track its score lies between 0 and ``follow_min``:
+    the track carrying the emitter takes its reports then (``emitter_follow_min``), not 4 s
+    later after the next fix. (The emitter's fixes before the radar track appeared are not
+    kept for it here, ``rf_memory_s`` 0, so that its support starts with that first fix.)"""
+    path = _flight(np.array([-200.0, 300.0, 0.0]), 5.0, np.array([8.0, 0.0, 0.0]))
+    uav = Uav(path, 10, seen=lambda tau: tau >= 30.0, freq_hz=FREQ_A, uav_prob=0.28)
+    prof = load_profile("tracker")
+    prof = prof.with_changes(score=dataclasses.replace(prof.score, rf_memory_s=0.0))
+    first = {}
+    for seed in (1, 2, 3):
+        stream = scene_stream(site, [uav], 70.0, seed)
+        for efm in (0.0, None):
+            tracker = MultiTracker(prof, site, MultiSettings(emitter_follow_min=efm))
+            epochs = run_multi(tracker, stream, 1.0, 1000.0, 1069.0)
+            on_uav = [ep.t - 1000.0 for ep in epochs if _near(site, ep, path)]
+            first[seed, efm] = on_uav[0]
+            assert len(on_uav) == 70 - on_uav[0]  # published on it from then on
+            assert all(len(ep.tracks) <= 1 for ep in epochs)
+            assert epochs[-1].tracks[0].emitter == emitter_key(FREQ_A)
+        assert first[seed, 0.0] <= 34.0 and first[seed, None] - first[seed, 0.0] >= 3.0  # 33, 37
+    assert MultiSettings().emitter_follow_min == 0.0

@@ -45,7 +45,9 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   tracker only); a fix that credits no object at all (an emitter the radar does not see
   yet: a UAV on its pad with its link on) is kept for ``rf_memory_s`` (0: not kept), and an
   object seen for the first time takes the support of the kept fixes inside its gate, as
-  if it had been credited when each was made (decayed since);
+  if it had been credited when each was made (decayed since). A fix given with its emitter's
+  key (the multi-UAV tracker) leaves that key on the objects it credits
+  (:attr:`RadarObject.rf_key`, the last one);
 * agreement with the fused track: moving average of "this object's report had an NIS of at
   most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
   the track's R allows for correlated errors), times ``fused_weight``; nothing is recorded
@@ -157,6 +159,7 @@ class RadarObject:
         "nis_mean",
         "rcs_mean",
         "rcs_seen",
+        "rf_key",
         "rf_support",
         "rf_t",
         "sd_up",
@@ -181,6 +184,7 @@ class RadarObject:
         self.rcs_seen = False  # any report with a finite RCS
         self.rf_support = 0.0
         self.rf_t = t
+        self.rf_key: str | None = None  # the emitter of the last RF fix that credited it
         self.fused = 0.0
         self.fused_t: float | None = None
         self.signature: tuple[object, ...] | None = None
@@ -245,7 +249,8 @@ class ObjectTable:
         self.cfg = cfg
         self.radar_r = radar_r
         self.objects: dict[int, RadarObject] = {}
-        self._orphans: list[tuple[float, float, float, float]] = []
+        # RF fixes that credited no object: (t, e, n, variance, emitter)
+        self._orphans: list[tuple[float, float, float, float, str | None]] = []
 
     def update(
         self,
@@ -388,9 +393,11 @@ class ObjectTable:
                 obj.fused = a * obj.fused + (1.0 - a) * v
         obj.fused_t = t
 
-    def rf_fix(self, t: float, e: float, n: float, var_m2: float) -> int:
-        """Credit every recent object whose predicted position agrees with an RF fix; returns
-        the number of objects credited."""
+    def rf_fix(
+        self, t: float, e: float, n: float, var_m2: float, key: str | None = None
+    ) -> int:
+        """Credit every recent object whose predicted position agrees with an RF fix (of the
+        emitter ``key``, when known); returns the number of objects credited."""
         cfg = self.cfg
         hits = 0
         best: tuple[float, RadarObject] | None = None
@@ -418,16 +425,18 @@ class ObjectTable:
                     continue
                 obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
                 obj.rf_t = t
+                obj.rf_key = key
                 hits += 1
         if best is not None:
             obj = best[1]
             obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
             obj.rf_t = t
+            obj.rf_key = key
             hits += 1
         if hits == 0 and cfg.rf_memory_s > 0:
             keep = t - cfg.rf_memory_s
             self._orphans = [o for o in self._orphans if o[0] >= keep]
-            self._orphans.append((t, e, n, var_m2))
+            self._orphans.append((t, e, n, var_m2, key))
         return hits
 
     def _adopt_orphans(
@@ -437,10 +446,11 @@ class ObjectTable:
         inside its gate (first report ``e``, ``n`` with R ``r``); those fixes are used up."""
         cfg = self.cfg
         keep = t - cfg.rf_memory_s
-        left: list[tuple[float, float, float, float]] = []
+        left: list[tuple[float, float, float, float, str | None]] = []
         sup = 0.0
+        key: str | None = None
         for o in self._orphans:
-            tf, fe, fn, var = o
+            tf, fe, fn, var, k = o
             if tf < keep:
                 continue
             s00 = r[0] + var
@@ -452,9 +462,11 @@ class ObjectTable:
             q = s11 * de * de - 2.0 * s01 * de * dn + s00 * dn * dn
             if det > 0 and q / det <= RF_GATE_99_2DOF:
                 sup += math.exp(-(t - tf) / cfg.rf_tau_s) if cfg.rf_tau_s > 0 else 0.0
+                key = k
             else:
                 left.append(o)
         self._orphans = left
         if sup:
             obj.rf_support = sup
             obj.rf_t = t
+            obj.rf_key = key

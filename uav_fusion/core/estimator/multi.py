@@ -16,11 +16,15 @@ Per radar frame (one time for all reports):
 1. every finite report updates its radar object; reports beyond the range gate (or, with
    ``far_gate_m``, beyond the far gate), coasted reports (with
    ``association.skip_radar_coasts``) and reports of objects scoring below ``follow_min``
-   are not candidates; a candidate between the range gate and the far gate, or below the
-   ground (``flat_below_ground``), is horizontal only: it may update a track (its climb rate
-   held near zero first); one below the ground never starts a track, one beyond the range
-   gate may (step 4), with the RF start's height prior (``rf_init_altitude_m``,
-   ``rf_init_altitude_std_m``) and no climb;
+   are not candidates, except for one track: an object scoring at least
+   ``emitter_follow_min`` whose last RF credit came from an emitter (its
+   :attr:`~uav_fusion.core.estimator.association.RadarObject.rf_key`, still supported) may
+   update the track carrying that emitter (a young radar track on an emitting UAV, its class
+   not yet built up, where the emitter's own fix put it); a candidate between the range gate
+   and the far gate, or below the ground (``flat_below_ground``), is horizontal only: it may
+   update a track (its climb rate held near zero first); one below the ground never starts a
+   track, one beyond the range gate may (step 4), with the RF start's height prior
+   (``rf_init_altitude_m``, ``rf_init_altitude_std_m``) and no climb;
 2. every track is predicted to the frame's time (the deleter drops a track whose last
    accepted measurement is older than ``max_coast_s``);
 3. tracks and candidates are assigned one to one (global nearest neighbour: Hungarian
@@ -292,6 +296,8 @@ class MultiTracker:
         rx, ry, rz = self._radar_pos
         cands: list[_Cand] = []
         far_cands: set[int] = set()  # candidates beyond the range gate (horizontal only)
+        weak: set[int] = set()  # candidates for the track of their object's emitter only
+        efm = self.settings.emitter_follow_min
         flat = self.settings.flat_below_ground
         if frame.tracks:
             self._count("radar_reports", len(frame.tracks))
@@ -331,6 +337,18 @@ class MultiTracker:
                 if d2 > gate2:
                     far_cands.add(len(cands))
                 cands.append((trk, obj, s, r, z))
+            elif (
+                efm is not None
+                and s >= efm
+                and obj.rf_key is not None
+                and obj.rf_support_at(t, cfg.rf_tau_s) > 0.0
+            ):
+                # too weak to follow, but where an emitter's fix says its UAV is: only the
+                # track carrying that emitter may take it
+                weak.add(len(cands))
+                if d2 > gate2:
+                    far_cands.add(len(cands))
+                cands.append((trk, obj, s, r, z))
         self._advance(t)
         take_tentative = self.settings.tentative_takes_radar
         live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
@@ -358,8 +376,8 @@ class MultiTracker:
             for tr, row in zip(live, nis_rows, strict=True):
                 x, pk = tr.filter.mean() if wv > 0.0 else ([], [])
                 crow = []
-                for c, n in zip(cands, row, strict=True):
-                    if not n <= g3:
+                for bi, (c, n) in enumerate(zip(cands, row, strict=True)):
+                    if not n <= g3 or (bi in weak and (c[1].rf_key != tr.emitter)):
                         crow.append(_FORBIDDEN)
                         continue
                     any_inside = True
@@ -520,9 +538,9 @@ class MultiTracker:
             return
         r = self.rf_r.r_for(att.cep, att.valid_sensors)
         z = (att.e, att.n)
-        self.objects.rf_fix(t, att.e, att.n, 0.5 * (r[0] + r[2]))
-        self._advance(t)
         em = emitter_key(att.center_freq_hz)
+        self.objects.rf_fix(t, att.e, att.n, 0.5 * (r[0] + r[2]), em)
+        self._advance(t)
         own = [tr for tr in self.tracks if tr.emitter == em and tr.t <= t]
         tentative_only = not self.settings.tentative_takes_radar and all(
             not tr.confirmed for tr in own

@@ -40,6 +40,8 @@ class MultiSettings:
     # (None: only from birth_age_s, or with RF support)
     class_by_age: bool = True  # the profile's class_prior_logit reading of young radar
     # tracks (False: each report's class as it is)
+    emitter_follow_min: float | None = 0.0  # an object scoring this much (below follow_min)
+    # that its emitter's fixes credit may update the track carrying that emitter (None: off)
 
 
 def multi_keys() -> tuple[str, ...]:
@@ -62,8 +64,10 @@ _RULES: dict[str, str] = {
     "birth_sep_m": "nn?",
     "early_birth_age_s": "nn?",
     "early_birth_speed_mps": "nn",
+    "emitter_follow_min": "num?",
 }
 _WHAT = {
+    "num": "a number",
     "p": "a number > 0",
     "nn": "a number >= 0",
     "unit": "a number in [0, 1]",
