@@ -353,7 +353,8 @@ def scene_stream(
             rcs = round(-10.0 + float(rng.normal(0.0, 2.0)), 3)
             reps.append(
                 RadarTrack(
-                    t, u.radar_id, 0.0, 0.0, 0.0, *map(float, p), ned, u.uav_prob, None, rcs
+                    t, u.radar_id, 0.0, 0.0, 0.0, *map(float, p), ned, u.uav_prob,
+                    float(np.linalg.norm(p - r0)), rcs,
                 )
             )
         items.append((t, 0, RadarFrame(t, tuple(reps))))
@@ -715,3 +716,43 @@ def test_an_emitting_uav_is_followed_where_its_fixes_put_a_radar_track_still_cla
             assert epochs[-1].tracks[0].emitter == emitter_key(FREQ_A)
         assert first[seed, 0.0] <= 34.0 and first[seed, None] - first[seed, 0.0] >= 3.0  # 33, 37
     assert MultiSettings().emitter_follow_min == 0.0
+
+
+def test_a_far_young_radar_track_has_its_class_read_for_its_range(site: Site) -> None:
+    """A silent UAV first seen 1.5 km out, crossing the line of sight, its radar track's class
+    output built up as a classifier does (logit from the prior -1 towards 2.8, at a rate that
+    grows with the track's age and falls with its range): read for its range as well as its
+    age (``class_range_scale_m``) its track starts 4 s after the first report, the earliest a
+    moving object may (``early_birth_age_s``), instead of 6 s."""
+    az = math.radians(site.radar.boresight_az_deg)
+    start = np.array([1500.0 * math.sin(az), 1500.0 * math.cos(az), 60.0])
+    vel = np.array([8.0 * math.cos(az), -8.0 * math.sin(az), 0.0])  # across the line of sight
+
+    def path(tau: float) -> np.ndarray:
+        return start + vel * tau
+
+    def classifier(item: RadarFrame | RfAttempt) -> RadarFrame | RfAttempt:
+        if not isinstance(item, RadarFrame):
+            return item
+        reps = []
+        for r in item.tracks:
+            assert r.range_m is not None
+            age = item.t - 1010.0
+            logit = -1.0 + (1.0 - math.exp(-age / 5.0)) * math.exp(-r.range_m / 3000.0) * 3.8
+            reps.append(dataclasses.replace(r, uav_prob=1.0 / (1.0 + math.exp(-logit))))
+        return dataclasses.replace(item, tracks=tuple(reps))
+
+    for seed in (1, 2):
+        stream = scene_stream(site, [Uav(path, 10, seen=lambda tau: tau >= 10.0)], 60.0, seed)
+        stream = [classifier(item) for item in stream]
+        first = {}
+        for scale in (3000.0, None):
+            settings = MultiSettings(class_range_scale_m=scale)
+            epochs = run_multi(
+                MultiTracker(load_profile("tracker"), site, settings), stream, 1.0, 1000.0, 1059.0
+            )
+            on_uav = [ep.t - 1000.0 for ep in epochs if _near(site, ep, path)]
+            first[scale] = on_uav[0]
+            assert len(on_uav) == 60 - on_uav[0] and all(len(ep.tracks) <= 1 for ep in epochs)
+        assert first[3000.0] <= 14.0 and first[None] >= 16.0
+    assert MultiSettings().class_range_scale_m == 3000.0

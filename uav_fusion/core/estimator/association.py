@@ -13,7 +13,10 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   object's first report) counts as ``prior + (logit - prior) / w`` with ``w = max(
   class_min_weight, 1 - exp(-a / class_age_tau_s))`` (the UAV's young track at class
   probability 0.4 says more than an old one at 0.4), and the history starts at the prior
-  instead of at the first report;
+  instead of at the first report; with ``class_range_scale_m`` (set by the multi-UAV
+  tracker, not a profile key) ``w`` is also multiplied by ``exp(-range / class_range_scale_m)``
+  while the object is younger than ``class_range_age_s`` (the report's own ``range``; a far
+  track's classifier has fewer features, so its output leaves the prior more slowly);
 * kinematics: an object whose mean height (moving average of its reports' ENU up) lies
   below the ground by more than ``below_ground_m``, and by more than ``below_ground_sigmas``
   times the mean vertical standard deviation of its reports (from the radar's polar R: a few
@@ -126,12 +129,21 @@ class ScoreConfig:
     class_prior_logit: float | None = None
     class_age_tau_s: float = 4.0
     class_min_weight: float = 0.4
+    # ... and, while the object is younger than class_range_age_s, for its range: the weight is
+    # also multiplied by exp(-range / class_range_scale_m) (0: off). Not profile keys: the
+    # multi-UAV tracker sets them (MultiSettings); module text
+    class_range_scale_m: float = 0.0
+    class_range_age_s: float = 0.0
+
+
+#: ScoreConfig fields that are not ``association`` keys of a profile.
+_NOT_PROFILE_KEYS = ("class_range_scale_m", "class_range_age_s")
 
 
 
 def score_keys() -> tuple[str, ...]:
     """The profile keys of :class:`ScoreConfig` (``association.<key>``)."""
-    return tuple(f.name for f in fields(ScoreConfig))
+    return tuple(f.name for f in fields(ScoreConfig) if f.name not in _NOT_PROFILE_KEYS)
 
 
 def _ema(old: float, new: float, dt: float, tau: float) -> float:
@@ -354,7 +366,18 @@ class ObjectTable:
             prior = cfg.class_prior_logit
             if prior is not None:
                 # the report's distance from the prior, for the track's age
-                w = 1.0 - math.exp(-(t - obj.first_t) / cfg.class_age_tau_s)
+                age = t - obj.first_t
+                w = 1.0 - math.exp(-age / cfg.class_age_tau_s)
+                rng_m = trk.range_m
+                if (
+                    age < cfg.class_range_age_s
+                    and cfg.class_range_scale_m > 0.0
+                    and rng_m is not None
+                    and math.isfinite(rng_m)
+                ):
+                    # a far track's classifier has fewer features to go on: its output leaves
+                    # the prior more slowly
+                    w *= math.exp(-rng_m / cfg.class_range_scale_m)
                 if w < cfg.class_min_weight:
                     w = cfg.class_min_weight
                 lg = prior + (lg - prior) / w

@@ -6,7 +6,8 @@ confirmation, and the radar object table with its UAV score
 (:mod:`~uav_fusion.core.estimator.association`), which already follows every radar object.
 The score reads a young radar track's class for its age as the single-UAV tracker does (the
 profile's ``association.class_prior_logit``; ``MultiSettings.class_by_age`` False reads each
-report's class as it is; docs/estimator.md, "A young radar track's class").
+report's class as it is; docs/estimator.md, "A young radar track's class"), and, while the
+radar track is young, for its range too (``class_range_scale_m``, ``class_range_age_s``).
 Its own settings (:class:`~uav_fusion.core.estimator.multi_settings.MultiSettings`) are the
 profile's ``multi`` section (``config/profiles/README.md``, "Multi-UAV keys"); a ``settings``
 argument given to :class:`MultiTracker` replaces them.
@@ -177,8 +178,15 @@ class MultiTracker:
         self.profile = profile
         self.settings = settings or profile.multi
         self.cfg = profile.score
-        if not self.settings.class_by_age and self.cfg.class_prior_logit is not None:
+        st = self.settings
+        if not st.class_by_age and self.cfg.class_prior_logit is not None:
             self.cfg = replace(self.cfg, class_prior_logit=None)
+        elif st.class_range_scale_m is not None:
+            self.cfg = replace(
+                self.cfg,
+                class_range_scale_m=st.class_range_scale_m,
+                class_range_age_s=st.class_range_age_s,
+            )
         self.radar_r = radar_model_from_profile(profile, site)
         self._align = alignment_from_profile(profile, site)
         self.rf_r = rf_model_from_profile(profile)

@@ -40,6 +40,8 @@ class MultiSettings:
     # (None: only from birth_age_s, or with RF support)
     class_by_age: bool = True  # the profile's class_prior_logit reading of young radar
     # tracks (False: each report's class as it is)
+    class_range_scale_m: float | None = 3000.0  # with class_by_age, a radar track younger
+    class_range_age_s: float = 8.0  # than this has its class read for its range too (None: off)
     emitter_follow_min: float | None = 0.0  # an object scoring this much (below follow_min)
     # that its emitter's fixes credit may update the track carrying that emitter (None: off)
 
@@ -65,6 +67,8 @@ _RULES: dict[str, str] = {
     "early_birth_age_s": "nn?",
     "early_birth_speed_mps": "nn",
     "emitter_follow_min": "num?",
+    "class_range_scale_m": "p?",
+    "class_range_age_s": "nn",
 }
 _WHAT = {
     "num": "a number",

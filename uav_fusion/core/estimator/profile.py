@@ -194,7 +194,8 @@ class Profile:
                 "notch_sigma_mps": self.notch_sigma_mps,
                 "notch_range_m": self.notch_range_m,
             }
-            d["association"] = {"mode": "track_score", **asdict(self.score)}
+            score = asdict(self.score)
+            d["association"] = {"mode": "track_score", **{k: score[k] for k in score_keys()}}
             del d["radar_selection"]
             d["smoother"] = {"lag_s": self.smoother_lag_s}
         if self.uses_tracker or self.multi != MultiSettings():
