@@ -427,9 +427,6 @@ class MultiTracker:
                     self._reject(tr)
                     break
         # strong objects that no track explains start tracks
-        birth_age = self.settings.birth_age_s
-        if birth_age is None:
-            birth_age = cfg.stationary_min_age_s
         for b, (trk, obj, s, _r, z) in enumerate(cands):
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
                 continue
@@ -437,15 +434,7 @@ class MultiTracker:
             flat_start = far or len(z) != 3  # no usable height: start at the height prior
             if flat_start and not far and obj.below_ground(cfg):  # a ghost: no birth
                 continue
-            if (
-                obj.age_s < birth_age
-                and obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0
-                and not (
-                    self.settings.early_birth_age_s is not None
-                    and obj.age_s >= self.settings.early_birth_age_s
-                    and obj.speed >= self.settings.early_birth_speed_mps
-                )
-            ):
+            if not self._old_enough(obj, t):
                 continue
             if any(
                 nis_rows[a][b] <= g3 and not self._apart(a, b, took, cands)
@@ -458,6 +447,19 @@ class MultiTracker:
             tr.last_radar_t = t
             tr.score = s
         self._merge(t)
+
+    def _old_enough(self, obj: RadarObject, t: float) -> bool:
+        """Whether a strong object has been seen long enough to start a track: for
+        ``birth_age_s`` (default the score's ``stationary_min_age_s``), or for
+        ``early_birth_age_s`` while its mean speed is at least ``early_birth_speed_mps``, or
+        at any age with RF support."""
+        st = self.settings
+        birth_age = self.cfg.stationary_min_age_s if st.birth_age_s is None else st.birth_age_s
+        age = obj.age_s
+        if age >= birth_age or obj.rf_support_at(t, self.cfg.rf_tau_s) > 0.0:
+            return True
+        early = st.early_birth_age_s
+        return early is not None and age >= early and obj.speed >= st.early_birth_speed_mps
 
     def _apart(self, a: int, b: int, took: dict[int, int], cands: list[_Cand]) -> bool:
         """Whether candidate ``b``, inside live track ``a``'s gate, is another UAV than the
