@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         obs = observable_epochs(grid.t, ee.airborne, labels, settings.observable_window_s)
         gross = obs & ee.covered & (ee.error_m > settings.gross_error_m)
         tt, enu = flight.truth_arrays()
-        align = oracle._align.point if oracle._align is not None else None
+        align = oracle.alignment.point if oracle.alignment is not None else None
         rep_t, rep_err = uav_report_errors(
             stream, kinds, radar_model.uav_object_id(0), tt, enu, align
         )

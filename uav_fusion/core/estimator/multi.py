@@ -83,7 +83,13 @@ import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
 from uav_fusion.core.estimator.association import ObjectTable, RadarObject
-from uav_fusion.core.estimator.components import Deleter, MofN, PolarRadarR, scale_packed
+from uav_fusion.core.estimator.components import (
+    Deleter,
+    MofN,
+    PolarRadarR,
+    RadarAlignment,
+    scale_packed,
+)
 from uav_fusion.core.estimator.filters import MotionFilter
 from uav_fusion.core.estimator.kalman import PackedR, expand_upper
 from uav_fusion.core.estimator.multi_settings import MultiSettings
@@ -207,6 +213,12 @@ class MultiTracker:
         self.tracks: list[UavTrack] = []
         self._next_id = 1
         self.counters: dict[str, int] = {}
+
+    @property
+    def alignment(self) -> RadarAlignment | None:
+        """The radar's misalignment correction applied to every report before use (None:
+        the profile has none)."""
+        return self._align
 
     # --- output ---------------------------------------------------------------------------
     def _count(self, key: str, n: int = 1) -> None:
