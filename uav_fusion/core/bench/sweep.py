@@ -477,12 +477,17 @@ def _value_label(v: Any) -> str:
     return "null" if v is None else f"{v:g}"
 
 
+def _combo_label(params: dict[str, Any]) -> str:
+    """A parameter combination as ``name=value, ...`` (``-`` without parameters)."""
+    return ", ".join(f"{k}={_value_label(v)}" for k, v in params.items()) or "-"
+
+
 def summary_rows(rows: list[dict[str, Any]], spec: SweepSpec) -> list[tuple[str, str, float,
                                                                                float, float, int]]:
     """Per profile and combination: the metric's mean, min and max over the flights."""
     groups: dict[tuple[str, str], list[float]] = {}
     for r in rows:
-        label = ", ".join(f"{k}={_value_label(v)}" for k, v in r["params"].items()) or "-"
+        label = _combo_label(r["params"])
         val = r.get(spec.metric)
         if val is None or not math.isfinite(float(val)):
             continue
@@ -573,7 +578,7 @@ def tradeoff_rows(
     false-track time and GOSPA: (profile, combination, coverage %, false-track %, GOSPA m)."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in rows:
-        label = ", ".join(f"{k}={_value_label(v)}" for k, v in r["params"].items()) or "-"
+        label = _combo_label(r["params"])
         groups.setdefault((r["profile"], label), []).append(r)
     return [
         (

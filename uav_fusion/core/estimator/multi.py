@@ -353,22 +353,20 @@ class MultiTracker:
                 if obj.below_ground(cfg):
                     s += cfg.below_ground_weight
                 z, r = (e, n_), (r[0], r[1], r[3])
-            if s >= cfg.follow_min:
-                if d2 > gate2:
-                    far_cands.add(len(cands))
-                cands.append((trk, obj, s, r, z))
-            elif (
-                efm is not None
-                and s >= efm
-                and obj.rf_key is not None
-                and obj.rf_support_at(t, cfg.rf_tau_s) > 0.0
-            ):
-                # too weak to follow, but where an emitter's fix says its UAV is: only the
-                # track carrying that emitter may take it
+            if s < cfg.follow_min:
+                # too weak to follow, unless where an emitter's fix says its UAV is: then only
+                # the track carrying that emitter may take it
+                if (
+                    efm is None
+                    or s < efm
+                    or obj.rf_key is None
+                    or obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0
+                ):
+                    continue
                 weak.add(len(cands))
-                if d2 > gate2:
-                    far_cands.add(len(cands))
-                cands.append((trk, obj, s, r, z))
+            if d2 > gate2:
+                far_cands.add(len(cands))
+            cands.append((trk, obj, s, r, z))
         self._advance(t)
         take_tentative = self.settings.tentative_takes_radar
         live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
