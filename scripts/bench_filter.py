@@ -25,9 +25,9 @@ from typing import TypeVar
 
 import numpy as np
 
-from uav_fusion.core.estimator import FusionEstimator, Profile, Step, load_profile
-from uav_fusion.core.estimator.models import cv_transition, position_h
-from uav_fusion.core.estimator.synthetic import simulate_stream
+from uav_fusion.core.estimators import FusionEstimator, Profile, Step, load_profile
+from uav_fusion.core.estimators.models import cv_transition, position_h
+from uav_fusion.core.estimators.synthetic import simulate_stream
 from uav_fusion.core.records import RADAR, Measurement
 from uav_fusion.core.site import Site, load_site
 

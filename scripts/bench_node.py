@@ -22,7 +22,7 @@ per run:
 
 The relay (``--relay``, run by this script) is the least a node can do with these inputs: it
 subscribes both topics with the same QoS, runs under the same node runtime
-(:mod:`uav_fusion.ros.runtime`, one SingleThreadedExecutor), and publishes one
+(:mod:`uav_fusion.ros.app`, one SingleThreadedExecutor), and publishes one
 ``nav_msgs/Odometry`` per input, stamped like it. The fusion node runs with the profile given
 (``paper``, pinned by default so the figure tracks the node, not the estimator).
 
@@ -67,8 +67,8 @@ def relay_main() -> int:
     from nav_msgs.msg import Odometry
     from rclpy.node import Node
 
+    from uav_fusion.ros.app import run_node
     from uav_fusion.ros.qos import stream_qos
-    from uav_fusion.ros.runtime import run_node
 
     class Relay(Node):
         def __init__(self) -> None:
@@ -93,8 +93,8 @@ def receiver_main(out: str) -> int:
     from nav_msgs.msg import Odometry
     from rclpy.node import Node
 
+    from uav_fusion.ros.app import run_node
     from uav_fusion.ros.qos import stream_qos
-    from uav_fusion.ros.runtime import run_node
 
     got: list[tuple[int, float]] = []
 
@@ -136,9 +136,9 @@ class Feed:
 
 
 def build_feed(profile: str) -> Feed:
-    from uav_fusion.core.dataset import load_flight
-    from uav_fusion.core.estimator import load_profile, run_flight
-    from uav_fusion.core.radar_choice import radar_profile, selected_radar
+    from uav_fusion.core.data import load_flight
+    from uav_fusion.core.estimators import load_profile, run_flight
+    from uav_fusion.core.estimators.selection import radar_profile, selected_radar
     from uav_fusion.core.site import load_site
     from uav_fusion.resources import DEFAULT_FLIGHT, data_path
     from uav_fusion.ros import conversions as cv

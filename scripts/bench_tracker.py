@@ -30,11 +30,11 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import Profile, RunResult, load_profile, run_flight
-from uav_fusion.core.estimator.models import cv_process_noise, cv_transition
-from uav_fusion.core.metrics import interpolate_truth
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import Profile, RunResult, load_profile, run_flight
+from uav_fusion.core.estimators.models import cv_process_noise, cv_transition
 from uav_fusion.core.records import Flight
+from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import data_path
 

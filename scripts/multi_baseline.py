@@ -3,7 +3,7 @@
     python scripts/multi_baseline.py FLIGHT_FOLDER [...] [--profile tracker] [--grid-hz 1]
         [--radar-min-uav-prob P] [--jpda [--jpda-pd PD] [--jpda-max-hypotheses K]]
 
-For every flight, the multi-UAV tracker (:func:`uav_fusion.core.estimator.multi.run_multi`)
+For every flight, the multi-UAV tracker (:func:`uav_fusion.core.estimators.multi.run_multi`)
 and the Stone Soup baseline (:func:`run_stonesoup`) run over the same time-ordered radar
 frames and RF fixes (``tracker_stream``) and give their confirmed tracks on the same grid
 (the span of the flight's truth). Printed per flight: the wall time of each run
@@ -11,7 +11,7 @@ frames and RF fixes (``tracker_stream``) and give their confirmed tracks on the 
 ours, the number of distinct confirmed track ids on the grid, and per vehicle the share of
 its airborne epochs (more than 5 m above its first truth sample) with a track within 100 m
 (coverage), the track-epochs farther than 100 m from every vehicle (false-track epochs), and
-the multi-target scores of :mod:`uav_fusion.core.multiscore` (mean GOSPA, id switches).
+the multi-target scores of :mod:`uav_fusion.core.scoring.gospa` (mean GOSPA, id switches).
 
 The baseline (Stone Soup's ``MultiTargetTracker`` driven scan by scan; a scan is one radar
 frame, or one RF fix):
@@ -110,19 +110,19 @@ from stonesoup.types.track import Track
 from stonesoup.types.update import Update
 from stonesoup.updater.kalman import KalmanUpdater
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import Profile, load_profile
-from uav_fusion.core.estimator.components import packed_to_array
-from uav_fusion.core.estimator.multi import GridEpoch, MultiTracker, TrackOutput, run_multi
-from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.estimator.tracker import (
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import Profile, load_profile
+from uav_fusion.core.estimators.components import packed_to_array
+from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, TrackOutput, run_multi
+from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.estimators.tracker import (
     alignment_from_profile,
     radar_model_from_profile,
     rf_model_from_profile,
 )
-from uav_fusion.core.metrics import interpolate_truth
-from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, pool, score_flight
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
+from uav_fusion.core.scoring.gospa import MultiScoreSettings, UavTruth, pool, score_flight
+from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import Site, load_site
 
 FloatArray = npt.NDArray[np.float64]
@@ -654,7 +654,7 @@ def main(argv: list[str] | None = None) -> int:
         "--strict-grounded",
         action="store_true",
         help="GOSPA: a track on a UAV that is not airborne counts as false (default: excused; "
-        "uav_fusion.core.multiscore)",
+        "uav_fusion.core.scoring.gospa)",
     )
     args = ap.parse_args(argv)
     jpda = JpdaSettings(args.jpda_pd, args.jpda_max_hypotheses) if args.jpda else None

@@ -35,12 +35,12 @@ import numpy as np
 
 from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_flight
 from uav_fusion.core.bench.definition import BenchDefinition, load_definition
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator.multi import GridEpoch, MultiTracker, run_multi
-from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.multiscore import MultiScoreSettings, UavTruth, score_flight
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, run_multi
+from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.estimators.profile import load_profile
 from uav_fusion.core.records import Flight, RadarFrame
+from uav_fusion.core.scoring.gospa import MultiScoreSettings, UavTruth, score_flight
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin import radar_model
 from uav_fusion.core.twin.config import load_twin_config

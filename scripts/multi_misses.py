@@ -33,9 +33,9 @@ import numpy.typing as npt
 from uav_fusion.core.bench.cache import cached_flights, generate_flight, read_vehicle_labels
 from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.bench.multi import MultiScoreTask, multi_score_task, near_labels
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.multiscore import UavTruth
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.scoring.gospa import UavTruth
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 

@@ -51,17 +51,17 @@ from uav_fusion.core.bench.multi import (
     multi_score_task,
     pool_multi,
 )
-from uav_fusion.core.estimator.association import RadarObject
-from uav_fusion.core.estimator.components import scale_packed
-from uav_fusion.core.estimator.kalman import PackedR
-from uav_fusion.core.estimator.multi import (
+from uav_fusion.core.estimators.components import scale_packed
+from uav_fusion.core.estimators.kalman import PackedR
+from uav_fusion.core.estimators.multi import (
     MultiSettings,
     MultiTracker,
     UavTrack,
     emitter_key,
 )
-from uav_fusion.core.estimator.profile import Profile, load_profile
-from uav_fusion.core.estimator.tracker import object_start
+from uav_fusion.core.estimators.objects import RadarObject
+from uav_fusion.core.estimators.profile import Profile, load_profile
+from uav_fusion.core.estimators.tracker import object_start
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin import radar_model

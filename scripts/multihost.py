@@ -682,8 +682,8 @@ def _report(the_lab: Lab, flight: Path, opts: argparse.Namespace, outage: Outage
 
 def compare_offline(flight: Path, steps: list[Any]) -> str:
     """Compare the evaluator's fused track with ``run_flight`` (paper profile), bit for bit."""
-    from uav_fusion.core.dataset import load_flight
-    from uav_fusion.core.estimator import load_profile, run_flight
+    from uav_fusion.core.data import load_flight
+    from uav_fusion.core.estimators import load_profile, run_flight
     from uav_fusion.core.site import load_site
 
     site = load_site()

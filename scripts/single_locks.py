@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.estimator.runner import feed_tracker, tracker_stream
-from uav_fusion.core.estimator.tracker import Tracker
+from uav_fusion.core.estimators.offline import feed_tracker, tracker_stream
+from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import RadarFrame
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path

@@ -46,18 +46,18 @@ import numpy as np
 
 from uav_fusion.core.bench.cache import read_labels
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.estimator.runner import run_flight
-from uav_fusion.core.estimator.track import UPDATED
-from uav_fusion.core.estimator.tracker import TrackerStep
-from uav_fusion.core.grid import grid_from_steps
-from uav_fusion.core.gridscore import (
+from uav_fusion.core.estimators.grid import grid_from_steps
+from uav_fusion.core.estimators.offline import run_flight
+from uav_fusion.core.estimators.paper import UPDATED
+from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.estimators.tracker import TrackerStep
+from uav_fusion.core.records import RADAR
+from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
     ScoreSettings,
     epoch_errors,
     observable_epochs,
 )
-from uav_fusion.core.records import RADAR
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 

@@ -43,12 +43,13 @@ import numpy.typing as npt
 
 from uav_fusion.core.bench.cache import read_labels
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.bench.run import ScoreTask, score_task
-from uav_fusion.core.estimator.multi import MultiSettings, run_multi
-from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.grid import grid_from_published
-from uav_fusion.core.gridscore import (
+from uav_fusion.core.bench.single import ScoreTask, score_task
+from uav_fusion.core.estimators.grid import grid_from_published
+from uav_fusion.core.estimators.multi import MultiSettings, run_multi
+from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.records import RadarFrame, RfAttempt
+from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
     GridSamples,
     epoch_errors,
@@ -56,7 +57,6 @@ from uav_fusion.core.gridscore import (
     pool,
     score_grid,
 )
-from uav_fusion.core.records import RadarFrame, RfAttempt
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin import radar_model
 from uav_fusion.resources import DEFAULT_SITE, config_path

@@ -21,13 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from uav_fusion.core import radar_class
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.estimator.runner import run_flight
-from uav_fusion.core.estimator.selection import largest_track_id
-from uav_fusion.core.metrics import interpolate_truth
+from uav_fusion.core.data import load_flight, uav_class
+from uav_fusion.core.estimators.offline import run_flight
+from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.estimators.selection import largest_track_id
 from uav_fusion.core.records import RF
+from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
@@ -46,7 +45,7 @@ def analyse(folder: Path, profile_name: str) -> None:
     rpos = np.asarray(site.radar.enu, dtype=float)
     tt, tenu = flight.truth_arrays()
 
-    uav_ids, _ = radar_class.uav_track_ids(flight.radar, profile.raw_radar_min_mean_uav_prob)
+    uav_ids, _ = uav_class.uav_track_ids(flight.radar, profile.raw_radar_min_mean_uav_prob)
     uav = [t for f in flight.radar for t in f.tracks if t.track_id in uav_ids]
     n_uav = len(uav)
     rng = np.array([np.linalg.norm(np.array((t.e, t.n, t.u)) - rpos) for t in uav])

@@ -16,8 +16,8 @@ from collections import Counter
 
 import numpy as np
 
-from uav_fusion.core.calibration import calibrate
-from uav_fusion.core.estimator.selection import largest_track_id
+from uav_fusion.core.estimators.selection import largest_track_id
+from uav_fusion.core.scoring.calibration import calibrate
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin import generate_twin, load_flight_plan, load_twin_config, twin_to_flight
 from uav_fusion.core.twin.config import DEFAULT_WAYPOINTS

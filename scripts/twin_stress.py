@@ -16,10 +16,10 @@ from collections import Counter
 
 import numpy as np
 
-from uav_fusion.core import radar_class
-from uav_fusion.core.estimator.profile import load_profile
-from uav_fusion.core.estimator.runner import run_flight
-from uav_fusion.core.metrics import interpolate_truth
+from uav_fusion.core.data import uav_class
+from uav_fusion.core.estimators.offline import run_flight
+from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin import generate_twin, load_flight_plan, load_twin_config, twin_to_flight
 from uav_fusion.resources import config_path
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
             kinds = Counter(r.kind for f in twin.radar_sim for r in f.tracks if r.track_id == sel)
             main_kind = kinds.most_common(1)[0][0] if kinds else "none"
             non_uav += int(main_kind != "uav")
-            uav_ids, _ = radar_class.uav_track_ids(
+            uav_ids, _ = uav_class.uav_track_ids(
                 flight.radar, profile.raw_radar_min_mean_uav_prob
             )
             n_uav = sum(1 for f in flight.radar for t in f.tracks if t.track_id in uav_ids)

@@ -18,8 +18,8 @@ from rosbags.highlevel import AnyReader
 
 from uav_fusion.bag.convert import TYPES, convert_flight, topic_name
 from uav_fusion.bag.writer import jazzy_typestore
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.radar_choice import (
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators.selection import (
     radar_profile,
     raw_radar_reports,
     report_covariance,

@@ -12,8 +12,8 @@ import pytest
 from test_graph_flight import write_flight
 
 from uav_fusion.cli import main
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import load_profile, run_flight
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import load_profile, run_flight
 from uav_fusion.core.site import load_site
 from uav_fusion.ros.conversions import time_from_stamp
 

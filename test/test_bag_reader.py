@@ -289,9 +289,9 @@ def test_convert_flight_writes_what_the_replay_nodes_publish(tmp_path: Path) -> 
     from test_graph_flight import write_flight
 
     from uav_fusion.bag.convert import convert_flight
-    from uav_fusion.core.dataset import load_flight
-    from uav_fusion.core.estimator import load_profile
-    from uav_fusion.core.radar_choice import raw_radar_reports, selected_radar
+    from uav_fusion.core.data import load_flight
+    from uav_fusion.core.estimators import load_profile
+    from uav_fusion.core.estimators.selection import raw_radar_reports, selected_radar
     from uav_fusion.core.site import load_site
     from uav_fusion.ros.conversions import time_from_stamp
 
@@ -379,7 +379,7 @@ def test_bundled_bag_matches_the_bundled_flight(tmp_path: Path) -> None:
     from geometry_msgs.msg import PoseWithCovarianceStamped
 
     from uav_fusion.bag.convert import convert_flight
-    from uav_fusion.core.dataset import load_flight
+    from uav_fusion.core.data import load_flight
     from uav_fusion.core.site import load_site
 
     bundled = REPO / "bags" / "default_flight"

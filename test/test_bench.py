@@ -15,9 +15,9 @@ from script_util import load_script
 from uav_fusion.cli import main
 from uav_fusion.core.bench.cache import LABELS_FILE, cached_flights, generate_flight, read_labels
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.bench.run import GenerateTask, ScoreTask, generate_task, score_task
+from uav_fusion.core.bench.single import GenerateTask, ScoreTask, generate_task, score_task
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimator import load_profile
+from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin.trajectory import load_flight_plan
 from uav_fusion.resources import DEFAULT_SITE, config_path

@@ -25,13 +25,14 @@ from uav_fusion.core.bench.multi import (
     multi_score_task,
     pool_multi,
 )
-from uav_fusion.core.bench.run import GenerateTask, generate_task
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.bench.single import GenerateTask, generate_task
+from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimator import load_profile
-from uav_fusion.core.estimator.multi import MultiTracker, run_multi
-from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.multiscore import (
+from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.multi import MultiTracker, run_multi
+from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.records import Flight, TruthFix
+from uav_fusion.core.scoring.gospa import (
     EpochTracks,
     MultiScoreSettings,
     TrackEstimate,
@@ -39,7 +40,6 @@ from uav_fusion.core.multiscore import (
     pool,
     score_flight,
 )
-from uav_fusion.core.records import Flight, TruthFix
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 

@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 from uav_fusion.cli import main as cli_main
-from uav_fusion.core.calibration import (
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.data.uav_class import uav_track_ids
+from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
+from uav_fusion.core.scoring.calibration import (
     angle_residuals,
     calibrate,
     format_alignment,
     format_calibration,
     radar_alignment,
 )
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.radar_class import uav_track_ids
-from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
@@ -201,9 +201,9 @@ def test_one_uav_report_rule_for_calibration_evaluation_and_replay() -> None:
     """Calibration, the evaluate command's raw row and radar_replay's raw topic take the same
     reports: every report of the tracks whose mean catProb[0] reaches the threshold (a track
     with one UAV-looking report among bird ones stays out; one without probabilities is in)."""
-    from uav_fusion.core.estimator import load_profile
-    from uav_fusion.core.radar_choice import raw_radar_reports
-    from uav_fusion.core.radar_class import track_mean_uav_prob, uav_class_tracks
+    from uav_fusion.core.data.uav_class import track_mean_uav_prob, uav_class_tracks
+    from uav_fusion.core.estimators import load_profile
+    from uav_fusion.core.estimators.selection import raw_radar_reports
     from uav_fusion.core.records import Flight, RadarFrame, RadarTrack
 
     def trk(t: float, tid: int, p: float | None) -> RadarTrack:

@@ -11,11 +11,10 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 
-from uav_fusion.core import clouds
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.encoding import MessageError
-from uav_fusion.core.estimator import load_profile
-from uav_fusion.core.radar_choice import report_covariance
+from uav_fusion.core.data import clouds, load_flight
+from uav_fusion.core.data.encoding import MessageError
+from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.selection import report_covariance
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path

@@ -169,7 +169,7 @@ def test_scalar_covariance_check_decides_like_numpy() -> None:
 
 
 def test_odometry_from_values_equals_the_array_path() -> None:
-    from uav_fusion.core.estimator import FusionEstimator, load_profile
+    from uav_fusion.core.estimators import FusionEstimator, load_profile
     from uav_fusion.core.site import load_site
     from uav_fusion.ros.conversions import odometry_from_values, state_to_odometry
 

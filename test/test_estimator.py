@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from uav_fusion.core.errors import ConfigError, DataError
-from uav_fusion.core.estimator import (
+from uav_fusion.core.estimators import (
     CvKalman,
     FusionEstimator,
     Profile,
@@ -31,9 +31,9 @@ from uav_fusion.core.estimator import (
     run_flight,
     run_stream,
 )
-from uav_fusion.core.estimator.noise import sample_cov, trimmed_cov
-from uav_fusion.core.estimator.synthetic import simulate_stream, stream_to_flight
+from uav_fusion.core.estimators.synthetic import simulate_stream, stream_to_flight
 from uav_fusion.core.records import RADAR, RF, Measurement, RadarFrame, RadarTrack
+from uav_fusion.core.scoring.noise import sample_cov, trimmed_cov
 from uav_fusion.core.site import Site, load_site
 
 R3 = np.diag([100.0, 100.0, 150.0])
@@ -586,7 +586,7 @@ def test_missing_and_broken_profile(tmp_path: Path) -> None:
 
 # --- R estimation ------------------------------------------------------------------------------
 def test_q_from_truth_recovers_the_simulated_density(site: Site) -> None:
-    from uav_fusion.core.estimator.noise import estimate_q_from_truth
+    from uav_fusion.core.scoring.noise import estimate_q_from_truth
 
     q = (3.0, 1.0, 0.2)
     s = simulate_stream(4, 4000.0, q, R3, R2, radar_period_s=0.5, jitter=0.0)

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.stats import binom, chi2
 
-from uav_fusion.core.estimator import FusionEstimator, Step, load_profile
-from uav_fusion.core.estimator.synthetic import simulate_stream
+from uav_fusion.core.estimators import FusionEstimator, Step, load_profile
+from uav_fusion.core.estimators.synthetic import simulate_stream
 from uav_fusion.core.records import RADAR
 from uav_fusion.core.site import load_site
 

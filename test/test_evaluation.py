@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uav_fusion.core.evaluation import (
+from uav_fusion.core.records import Measurement
+from uav_fusion.core.scoring.evaluation import (
     ROW_KEYS,
     Evaluation,
     Evaluator,
@@ -20,7 +21,6 @@ from uav_fusion.core.evaluation import (
     rows_summary,
     time_coverage_pct,
 )
-from uav_fusion.core.records import Measurement
 
 T0 = 1_760_000_000.0
 
@@ -374,7 +374,7 @@ def test_steps_are_classed_by_their_updated_coasted_and_validated_flags() -> Non
 
 
 def _synthetic_flight() -> tuple[object, object]:
-    from uav_fusion.core.estimator.synthetic import simulate_stream, stream_to_flight
+    from uav_fusion.core.estimators.synthetic import simulate_stream, stream_to_flight
     from uav_fusion.core.records import RadarTrack
     from uav_fusion.core.site import load_site
 
@@ -400,7 +400,7 @@ def _synthetic_flight() -> tuple[object, object]:
 def test_offline_evaluation_counts_agree_with_the_estimator() -> None:
     from uav_fusion.commands.evaluate import evaluate_flight
     from uav_fusion.core.errors import ConfigError
-    from uav_fusion.core.estimator import load_profile, run_flight
+    from uav_fusion.core.estimators import load_profile, run_flight
     from uav_fusion.core.records import Flight
     from uav_fusion.core.site import Site
 
@@ -465,7 +465,7 @@ def test_tentative_estimator_steps_are_counted_but_never_scored() -> None:
     """Steps of an RF track that is not yet confirmed (status ``tentative``, NaN state when
     the track was dropped) are listed by status; the fused rows, their denominator and the RF
     after-validation row only see the confirmed track's steps."""
-    from uav_fusion.core.estimator import FusionEstimator, load_profile
+    from uav_fusion.core.estimators import FusionEstimator, load_profile
     from uav_fusion.core.site import load_site
 
     site = load_site()

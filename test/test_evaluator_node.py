@@ -22,8 +22,8 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
-from uav_fusion.core.evaluation import Evaluator
 from uav_fusion.core.records import TruthFix
+from uav_fusion.core.scoring.evaluation import Evaluator
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.nodes.evaluator_node import EvaluatorNode
 from uav_fusion.ros.conversions import (
@@ -296,7 +296,7 @@ def test_rcs_comes_from_the_flight_folder_when_given(ros: None, tmp_path: Path) 
     """Pose messages carry no RCS; with ``rcs_flight_dir`` each raw report gets its own."""
     from test_graph_flight import write_flight
 
-    from uav_fusion.core.dataset import load_flight
+    from uav_fusion.core.data import load_flight
     from uav_fusion.ros.conversions import radar_track_to_msg
 
     site = load_site()

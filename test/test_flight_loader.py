@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
-from uav_fusion.core.metrics import interpolate_truth, position_errors
+from uav_fusion.core.scoring.metrics import interpolate_truth, position_errors
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import data_path
 

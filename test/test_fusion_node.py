@@ -21,8 +21,8 @@ from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 from test_graph_flight import write_flight
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import flight_measurements, load_profile, run_flight
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import flight_measurements, load_profile, run_flight
 from uav_fusion.core.records import RADAR, Measurement
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode

@@ -19,12 +19,12 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import PointCloud2
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import load_profile
-from uav_fusion.core.estimator.multi import MultiGrid, MultiTracker
-from uav_fusion.core.estimator.runner import run_tracker, smooth_steps, tracker_stream
-from uav_fusion.core.estimator.tracker import Tracker
-from uav_fusion.core.grid import StepGrid
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.grid import StepGrid
+from uav_fusion.core.estimators.multi import MultiGrid, MultiTracker
+from uav_fusion.core.estimators.offline import run_tracker, smooth_steps, tracker_stream
+from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import RadarFrame, RadarTrack
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode

@@ -11,9 +11,9 @@ from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from test_graph_flight import write_flight
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import load_profile, run_flight
-from uav_fusion.core.evaluation import Evaluator, feed_flight, feed_steps
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import load_profile, run_flight
+from uav_fusion.core.scoring.evaluation import Evaluator, feed_flight, feed_steps
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.graph import Graph
 from uav_fusion.ros import conversions as cv
@@ -103,7 +103,7 @@ def test_graph_track_and_table_equal_the_offline_run(
 
 
 def _stream(flight: Any) -> list[list[Any]]:
-    from uav_fusion.core.estimator import flight_measurements
+    from uav_fusion.core.estimators import flight_measurements
 
     site = load_site()
     return [

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import largest_track_id
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import largest_track_id
 from uav_fusion.core.site import Site, load_site
 
 T0 = 1759866140.0  # 2025-10-07T19:42:20Z

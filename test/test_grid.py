@@ -1,4 +1,5 @@
-"""Fixed-rate output (core/grid.py) and its scoring (core/gridscore.py) on hand-made cases."""
+"""Fixed-rate output (core/estimators/grid.py) and its scoring (core/scoring/fixed_rate.py) on
+hand-made cases."""
 
 from __future__ import annotations
 
@@ -11,20 +12,20 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from uav_fusion.core.estimator import load_profile
-from uav_fusion.core.estimator.kalman import CvKalman
-from uav_fusion.core.estimator.models import kf_predict
-from uav_fusion.core.estimator.profile import Profile
-from uav_fusion.core.estimator.synthetic import simulate_stream
-from uav_fusion.core.estimator.track import FusionEstimator, Step
-from uav_fusion.core.grid import (
+from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.grid import (
     GridEmitter,
     StepGrid,
     TrackSnapshot,
     cv_predictor,
     grid_from_steps,
 )
-from uav_fusion.core.gridscore import (
+from uav_fusion.core.estimators.kalman import CvKalman
+from uav_fusion.core.estimators.models import kf_predict
+from uav_fusion.core.estimators.paper import FusionEstimator, Step
+from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.synthetic import simulate_stream
+from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
     ScoreSettings,
     epoch_errors,
@@ -277,8 +278,8 @@ def test_emitter_rejects_going_back_and_emits_on_advance() -> None:
 
 def test_run_command_writes_the_grid(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from uav_fusion.cli import main
-    from uav_fusion.core.dataset import load_flight
-    from uav_fusion.core.estimator import run_flight
+    from uav_fusion.core.data import load_flight
+    from uav_fusion.core.estimators import run_flight
     from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
     out = tmp_path / "grid.csv"

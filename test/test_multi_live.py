@@ -18,14 +18,14 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import NavSatFix
 
 from uav_fusion.cli import main
-from uav_fusion.core.multiscore import (
+from uav_fusion.core.records import TruthFix
+from uav_fusion.core.scoring.gospa import (
     MultiScoreSettings,
     UavTruth,
     epochs_from_published,
     pool,
     score_flight,
 )
-from uav_fusion.core.records import TruthFix
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.nodes.evaluator_node import EvaluatorNode
 from uav_fusion.ros.conversions import state_to_odometry, truth_to_navsatfix

@@ -11,8 +11,8 @@ import pytest
 from script_util import load_script
 from test_multi_tracker import FREQ_A, Crossing
 
-from uav_fusion.core.estimator import load_profile
-from uav_fusion.core.estimator.multi import MultiSettings, emitter_key, run_multi
+from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.multi import MultiSettings, emitter_key, run_multi
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin import radar_model
 from uav_fusion.core.twin.writers import MANIFEST

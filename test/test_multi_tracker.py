@@ -16,8 +16,8 @@ import pytest
 import yaml
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimator import load_profile, profile_from_dict
-from uav_fusion.core.estimator.multi import (
+from uav_fusion.core.estimators import load_profile, profile_from_dict
+from uav_fusion.core.estimators.multi import (
     UNKNOWN_EMITTER,
     GridEpoch,
     MultiSettings,
@@ -121,7 +121,7 @@ def test_two_uavs_crossing_keep_their_ids_and_no_clutter_track(site: Site) -> No
 
 
 def test_the_radar_misalignment_is_corrected_before_any_report_is_used(site: Site) -> None:
-    from uav_fusion.core.estimator.components import RadarAlignment
+    from uav_fusion.core.estimators.components import RadarAlignment
 
     r0 = tuple(float(v) for v in site.radar.enu)
     skew = RadarAlignment(r0, -1.5, -0.5)  # type: ignore[arg-type]

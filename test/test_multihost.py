@@ -17,8 +17,8 @@ import pytest
 from script_util import load_script
 from test_graph_flight import write_flight
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import load_profile, run_flight
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import load_profile, run_flight
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 

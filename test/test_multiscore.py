@@ -1,4 +1,4 @@
-"""Multi-target scoring (core/multiscore.py): GOSPA on hand cases, against brute force and
+"""Multi-target scoring (core/scoring/gospa.py): GOSPA on hand cases, against brute force and
 against Stone Soup's GOSPAMetric; the per-flight scorer's coverage, errors, ID switches,
 fragmentations, false-track time and pooling on hand-made flights."""
 
@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from uav_fusion.core.multiscore import (
+from uav_fusion.core.scoring.gospa import (
     EpochTracks,
     GospaSettings,
     MultiScoreSettings,

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from uav_fusion.core.estimator import FusionEstimator, Step, load_profile
-from uav_fusion.core.estimator.models import cv_process_noise, cv_transition, position_h
-from uav_fusion.core.estimator.synthetic import simulate_stream
+from uav_fusion.core.estimators import FusionEstimator, Step, load_profile
+from uav_fusion.core.estimators.models import cv_process_noise, cv_transition, position_h
+from uav_fusion.core.estimators.synthetic import simulate_stream
 from uav_fusion.core.records import RADAR, Measurement
 from uav_fusion.core.site import load_site
 

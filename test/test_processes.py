@@ -23,8 +23,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import NavSatFix
 from test_graph_flight import write_flight
 
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.estimator import load_profile, run_flight
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators import load_profile, run_flight
 from uav_fusion.core.site import load_site
 from uav_fusion.ros import conversions as cv
 from uav_fusion.ros.qos import stream_qos

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from readers_util import ReaderFiles, lines
 
-from uav_fusion.core.dataset import read_radar_jsonl
+from uav_fusion.core.data import read_radar_jsonl
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.site import Site, load_site
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from readers_util import ReaderFiles, lines
 
-from uav_fusion.core.dataset import read_rf_csv
+from uav_fusion.core.data import read_rf_csv
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.site import Site, load_site
 

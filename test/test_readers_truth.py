@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from readers_util import ReaderFiles, lines
 
-from uav_fusion.core.dataset import read_truth
+from uav_fusion.core.data import read_truth
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.site import Site, load_site
 

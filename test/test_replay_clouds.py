@@ -13,7 +13,7 @@ from sensor_msgs.msg import PointCloud2
 from test_graph_flight import write_flight
 from test_replay_nodes import Collector, _params, spin_until
 
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.nodes.radar_replay import RadarReplay
 from uav_fusion.nodes.rf_replay import RfReplay
 from uav_fusion.ros import conversions as cv

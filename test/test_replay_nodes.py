@@ -18,7 +18,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import NavSatFix
 from test_graph_flight import write_flight
 
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.nodes.rf_replay import RfReplay
 from uav_fusion.nodes.truth_replay import TruthReplay
 from uav_fusion.ros import conversions as cv

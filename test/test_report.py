@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from uav_fusion.core.evaluation import ROWS, Evaluation, Evaluator
-from uav_fusion.core.report import CSV_FIELDS, FIGURE_TITLES, markdown_table, write_report
+from uav_fusion.core.scoring.evaluation import ROWS, Evaluation, Evaluator
+from uav_fusion.core.scoring.report import CSV_FIELDS, FIGURE_TITLES, markdown_table, write_report
 from uav_fusion.core.site import Site, load_site
 
 T0 = 1_760_000_000.0

@@ -1,4 +1,4 @@
-"""The one node runtime (uav_fusion.ros.runtime): every executable stops cleanly on SIGINT and
+"""The one node runtime (uav_fusion.ros.app): every executable stops cleanly on SIGINT and
 SIGTERM with exit 0; a hung teardown is forced out by the watchdog with a non-zero exit; a node
 that fails exits non-zero; one startup line names the effective parameters."""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from uav_fusion.ros.runtime import EXIT_FAILED, EXIT_FORCED, SHUTDOWN_GRACE_S
+from uav_fusion.ros.app import EXIT_FAILED, EXIT_FORCED, SHUTDOWN_GRACE_S
 
 pytestmark = pytest.mark.processes
 
@@ -111,7 +111,7 @@ def test_a_hung_teardown_is_forced_out_with_a_non_zero_exit() -> None:
     code = (
         "import time\n"
         "from rclpy.node import Node\n"
-        "from uav_fusion.ros.runtime import run_node\n"
+        "from uav_fusion.ros.app import run_node\n"
         "class Stuck(Node):\n"
         "    def __init__(self):\n"
         "        super().__init__('stuck')\n"
@@ -132,7 +132,7 @@ def test_a_teardown_that_locks_the_interpreter_is_ended_with_its_stack() -> None
     code = (
         "import ctypes\n"
         "from rclpy.node import Node\n"
-        "from uav_fusion.ros.runtime import run_node\n"
+        "from uav_fusion.ros.app import run_node\n"
         "class Locked(Node):\n"
         "    def __init__(self):\n"
         "        super().__init__('locked')\n"
@@ -151,7 +151,7 @@ def test_a_hung_stop_hook_after_a_signal_is_forced_out() -> None:
     code = (
         "import os, signal, threading, time\n"
         "from rclpy.node import Node\n"
-        "from uav_fusion.ros.runtime import run_node\n"
+        "from uav_fusion.ros.app import run_node\n"
         "def hang(node, executor):\n"
         "    time.sleep(60)\n"
         "def start(node):\n"
@@ -167,7 +167,7 @@ def test_a_signal_stops_a_node_with_exit_0_in_process_terms() -> None:
     code = (
         "import os, signal, threading\n"
         "from rclpy.node import Node\n"
-        "from uav_fusion.ros.runtime import run_node\n"
+        "from uav_fusion.ros.app import run_node\n"
         "stopped = []\n"
         "def start(node):\n"
         "    threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
@@ -185,7 +185,7 @@ def test_a_signal_stops_a_node_with_exit_0_in_process_terms() -> None:
 def test_a_failing_node_exits_non_zero_with_the_error() -> None:
     code = (
         "from rclpy.node import Node\n"
-        "from uav_fusion.ros.runtime import run_node\n"
+        "from uav_fusion.ros.app import run_node\n"
         "class Fails(Node):\n"
         "    def __init__(self):\n"
         "        super().__init__('fails')\n"

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from filterpy.kalman import rts_smoother
 
-from uav_fusion.core.estimator.filters import CvFilter, packed_arrays
-from uav_fusion.core.estimator.kalman import pack_r
-from uav_fusion.core.estimator.models import cv_process_noise, cv_transition
-from uav_fusion.core.estimator.smoothing import Filtered, fixed_lag, rts
+from uav_fusion.core.estimators.filters import CvFilter, packed_arrays
+from uav_fusion.core.estimators.kalman import pack_r
+from uav_fusion.core.estimators.models import cv_process_noise, cv_transition
+from uav_fusion.core.estimators.smoothing import Filtered, fixed_lag, rts
 
 Q = (1.5, 2.5, 0.7)
 
@@ -79,7 +79,7 @@ def test_fixed_lag_equals_rts_restricted_to_the_lag_window(lag: float) -> None:
 
 @pytest.mark.parametrize("lag_s", [0.0, 1.0, 3.0, 10.0])
 def test_streaming_fixed_lag_equals_the_batch_one(lag_s: float) -> None:
-    from uav_fusion.core.estimator.smoothing import Filtered, FixedLagSmoother, fixed_lag
+    from uav_fusion.core.estimators.smoothing import Filtered, FixedLagSmoother, fixed_lag
 
     rng = np.random.default_rng(4)
     t = np.cumsum(rng.choice([0.0, 0.25, 0.5, 4.0], size=120))  # repeats, gaps

@@ -1,4 +1,4 @@
-"""The live timeline policy (uav_fusion.core.timeline) without ROS: duplicates, future stamps,
+"""The live timeline policy (uav_fusion.core.live.timeline) without ROS: duplicates, future stamps,
 late runs and clock jumps back."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from uav_fusion.core.live.reorder import Batch
+from uav_fusion.core.live.timeline import Timeline, TimelineConfig
 from uav_fusion.core.records import RADAR, RF, Measurement
-from uav_fusion.core.reorder import Batch
-from uav_fusion.core.timeline import Timeline, TimelineConfig
 
 T0 = 1.7e9
 
@@ -53,7 +53,7 @@ def make(**kw: float) -> tuple[Timeline, Sink]:
 
 def test_no_rclpy_is_imported() -> None:
     code = (
-        "import sys, uav_fusion.core.timeline, uav_fusion.core.estimator; "
+        "import sys, uav_fusion.core.live.timeline, uav_fusion.core.estimators; "
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'rosidl_parser')))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -193,7 +193,7 @@ def test_no_clock_means_no_jump_detection() -> None:
 
 
 def test_estimator_restart_timeline_forgets_time() -> None:
-    from uav_fusion.core.estimator import FusionEstimator, load_profile
+    from uav_fusion.core.estimators import FusionEstimator, load_profile
     from uav_fusion.core.site import load_site
 
     est = FusionEstimator(load_profile("paper"), load_site(None))

@@ -14,11 +14,11 @@ import pytest
 import yaml
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimator import Profile, load_profile, run_flight
-from uav_fusion.core.estimator.association import ObjectTable, ScoreConfig
-from uav_fusion.core.estimator.components import FixedRadarR, RadarAlignment
-from uav_fusion.core.estimator.runner import feed_tracker, run_tracker
-from uav_fusion.core.estimator.tracker import Tracker, TrackerStep
+from uav_fusion.core.estimators import Profile, load_profile, run_flight
+from uav_fusion.core.estimators.components import FixedRadarR, RadarAlignment
+from uav_fusion.core.estimators.objects import ObjectTable, ScoreConfig
+from uav_fusion.core.estimators.offline import feed_tracker, run_tracker
+from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import Site, load_site
 
@@ -151,7 +151,7 @@ def test_tracker_profile_errors_name_file_and_key(
 
 
 def test_tracker_profiles_load_and_round_trip() -> None:
-    from uav_fusion.core.estimator.profile import profile_from_dict
+    from uav_fusion.core.estimators.profile import profile_from_dict
 
     for name in ("tracker", "tracker_smoothed"):
         p = load_profile(name)
@@ -169,8 +169,8 @@ def test_tracker_profiles_load_and_round_trip() -> None:
 
 
 def test_an_imm_profile_runs_and_round_trips(tmp_path: Path, site: Site) -> None:
-    from uav_fusion.core.estimator.filters import ImmFilter
-    from uav_fusion.core.estimator.profile import profile_from_dict
+    from uav_fusion.core.estimators.filters import ImmFilter
+    from uav_fusion.core.estimators.profile import profile_from_dict
 
     f = _edit_tracker(tmp_path, lambda d: d.update(motion=_imm()))
     p = load_profile(f)

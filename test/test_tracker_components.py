@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
-from uav_fusion.core.estimator.components import (
+from uav_fusion.core.estimators.components import (
     CEP_PER_SIGMA,
     CepRfR,
     Deleter,
@@ -21,9 +21,9 @@ from uav_fusion.core.estimator.components import (
     packed_to_array,
     validate_transition,
 )
-from uav_fusion.core.estimator.filters import CvFilter, ImmFilter, packed_arrays
-from uav_fusion.core.estimator.kalman import pack_r
-from uav_fusion.core.estimator.models import (
+from uav_fusion.core.estimators.filters import CvFilter, ImmFilter, packed_arrays
+from uav_fusion.core.estimators.kalman import pack_r
+from uav_fusion.core.estimators.models import (
     cv_process_noise,
     cv_transition,
     kf_predict,

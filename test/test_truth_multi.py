@@ -11,7 +11,7 @@ from sensor_msgs.msg import NavSatFix
 from test_graph_flight import write_flight
 from test_replay_nodes import Collector, _params, spin_until
 
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.nodes.truth_replay import TruthReplay
 from uav_fusion.ros import conversions as cv
 from uav_fusion.ros.params import ParamError

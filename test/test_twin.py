@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from uav_fusion.cli import main as cli_main
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin.config import (

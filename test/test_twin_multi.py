@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from uav_fusion.core.bench.cache import uav_report_times
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin import radar_model

@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from uav_fusion.core.dataset import load_flight, read_radar_jsonl, read_rf_csv, read_truth
+from uav_fusion.core.data import load_flight, read_radar_jsonl, read_rf_csv, read_truth
 from uav_fusion.core.errors import DataError
-from uav_fusion.core.estimator import load_profile, run_flight
-from uav_fusion.core.metrics import interpolate_truth
+from uav_fusion.core.estimators import load_profile, run_flight
+from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import Site, load_site
 
 SITE = load_site()

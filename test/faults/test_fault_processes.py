@@ -250,7 +250,7 @@ def test_restarted_replay_resends_its_file_and_repeats_are_not_fused_twice(
     """rf_replay stops after a few attempts and a new one replays the whole file again: the
     attempts already fused are dropped (``late_rf`` or ``rf_duplicate``), the rest is fused,
     and the RF stream still balances."""
-    from uav_fusion.core.dataset import load_flight
+    from uav_fusion.core.data import load_flight
     from uav_fusion.core.site import load_site
     from uav_fusion.nodes.rf_replay import RfReplay
 

@@ -21,7 +21,7 @@ from msgkit import FRAME, T0, cv, navsatfixes, odometries, points, poses
 from propkit import FUZZ_NODE_EXAMPLES, examples
 from rclpy.context import Context
 
-from uav_fusion.core.estimator import FusionEstimator, load_profile
+from uav_fusion.core.estimators import FusionEstimator, load_profile
 from uav_fusion.core.records import RADAR, RF, Measurement
 from uav_fusion.core.site import load_site
 

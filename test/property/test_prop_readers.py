@@ -23,7 +23,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from propkit import count_data_lines, damaged_lines, examples
 
-from uav_fusion.core.dataset import read_radar_jsonl, read_rf_csv, read_truth
+from uav_fusion.core.data import read_radar_jsonl, read_rf_csv, read_truth
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.records import LoadReport
 from uav_fusion.core.site import load_site

@@ -8,7 +8,7 @@ The bag holds exactly what the replay nodes would publish for the same flight an
   continuous track), ``geometry_msgs/PoseWithCovarianceStamped``;
 - ``radar/raw``: every UAV-class radar report, before selection, same type;
 - ``radar/tracks``: every report of every radar frame, one ``sensor_msgs/PointCloud2`` per
-  frame (layout :mod:`uav_fusion.core.clouds`, covariance from the profile's radar model);
+  frame (layout :mod:`uav_fusion.core.data.clouds`, covariance from the profile's radar model);
 - ``rf/fix``: every RF localisation attempt, ``geometry_msgs/PointStamped`` (NaN for a
   failed attempt);
 - ``rf/fixes``: the same attempts with CEP, sensor counts, centre frequency and RHO, one
@@ -17,8 +17,8 @@ The bag holds exactly what the replay nodes would publish for the same flight an
 
 Topic names sit under an optional namespace. Every message is stored at its sensor UTC time
 (receive time = stamp), so the player's ``/clock`` is sensor time. The field rules are
-:mod:`uav_fusion.core.encoding` (shared with the live conversions of
-:mod:`uav_fusion.ros.conversions`) and the selection is :mod:`uav_fusion.core.radar_choice`
+:mod:`uav_fusion.core.data.encoding` (shared with the live conversions of
+:mod:`uav_fusion.ros.conversions`) and the selection is :mod:`uav_fusion.core.estimators.selection`
 (shared with ``radar_replay``); serialization is rosbags' CDR, whose bytes equal those of a
 live rclpy publisher except alignment padding, which rosbags writes as zeros and rclpy leaves
 as whatever was in memory (tested). No rclpy is needed. The profile's name and radar R are
@@ -36,10 +36,10 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.bag.writer import BagWriter, WrittenBag, jazzy_typestore
-from uav_fusion.core import encoding as enc
-from uav_fusion.core.clouds import Cloud, radar_frame_to_cloud, rf_attempts_to_cloud
-from uav_fusion.core.encoding import time_to_ns
-from uav_fusion.core.radar_choice import (
+from uav_fusion.core.data import encoding as enc
+from uav_fusion.core.data.clouds import Cloud, radar_frame_to_cloud, rf_attempts_to_cloud
+from uav_fusion.core.data.encoding import time_to_ns
+from uav_fusion.core.estimators.selection import (
     radar_profile,
     raw_radar_reports,
     report_covariance,
@@ -163,7 +163,8 @@ def _store_custom(path: Path, R: FloatArray, profile: str, selection: str, name:
 
 
 class CdrMessages:
-    """Our message types as rosbags message objects (rules: :mod:`uav_fusion.core.encoding`)."""
+    """Our message types as rosbags message objects (rules:
+    :mod:`uav_fusion.core.data.encoding`)."""
 
     def __init__(self, typestore: Any) -> None:
         t = typestore.types
@@ -201,7 +202,7 @@ class CdrMessages:
         )
 
     def cloud(self, t: float, cloud: Cloud, frame_id: str) -> Any:
-        """A core :class:`~uav_fusion.core.clouds.Cloud` as a stamped PointCloud2."""
+        """A core :class:`~uav_fusion.core.data.clouds.Cloud` as a stamped PointCloud2."""
         return self._cloud(
             header=self.header(t, frame_id),
             height=1,

@@ -32,9 +32,9 @@ from uav_fusion.core.bench.report import (
     write_figure,
     write_summary_json,
 )
-from uav_fusion.core.bench.run import GenerateTask, ScoreTask, generate_task, score_task
+from uav_fusion.core.bench.single import GenerateTask, ScoreTask, generate_task, score_task
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimator.profile import Profile, load_profile, profile_path
+from uav_fusion.core.estimators.profile import Profile, load_profile, profile_path
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 

@@ -7,15 +7,15 @@ import argparse
 import json
 from pathlib import Path
 
-from uav_fusion.core.calibration import (
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.scoring.calibration import (
     angle_residuals,
     calibrate,
     format_alignment,
     format_calibration,
     radar_alignment,
 )
-from uav_fusion.core.dataset import load_flight
-from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin.writers import MANIFEST
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
@@ -67,7 +67,7 @@ def radar_position(
 
 def run(args: argparse.Namespace) -> int:
     if args.uav_prob is None:
-        from uav_fusion.core.estimator import load_profile
+        from uav_fusion.core.estimators import load_profile
 
         thr = load_profile("paper").raw_radar_min_mean_uav_prob
         args.uav_prob = 0.5 if thr is None else thr

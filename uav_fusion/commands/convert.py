@@ -27,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from uav_fusion.bag.convert import convert_flight
     from uav_fusion.bag.reader import BagReader
-    from uav_fusion.core.dataset.flight import load_flight
+    from uav_fusion.core.data.flight import load_flight
     from uav_fusion.core.site import load_site
 
     if args.out.exists():

@@ -150,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     if args.bag:
         return _run_bag(args, flight_dir, out)
 
-    from uav_fusion.core.evaluation import format_table
+    from uav_fusion.core.scoring.evaluation import format_table
 
     profiles = [args.profile]
     if args.compare and args.compare.lower() != "none" and args.compare != args.profile:
@@ -189,7 +189,7 @@ def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: s
     ov = _overrides(args, flight_dir, out)
     ov["fusion_node"]["profile"] = profile
     ov["radar_replay"]["profile"] = profile
-    from uav_fusion.core.estimator import load_profile
+    from uav_fusion.core.estimators import load_profile
 
     if load_profile(profile).uses_tracker:  # score the fixed-rate output too
         ov["evaluator_node"]["grid_topic"] = "fusion/odom"
@@ -271,8 +271,8 @@ def _run_multi(args: argparse.Namespace, out: Path) -> int:
     from rclpy.impl.logging_severity import LoggingSeverity
     from rclpy.logging import set_logger_level
 
-    from uav_fusion.core.dataset import load_flight
-    from uav_fusion.core.estimator import load_profile
+    from uav_fusion.core.data import load_flight
+    from uav_fusion.core.estimators import load_profile
     from uav_fusion.core.site import load_site
     from uav_fusion.nodes.graph import Graph
 
@@ -372,16 +372,16 @@ def _compare_multi_offline(
 
     import numpy as np
 
-    from uav_fusion.core.estimator.multi import MultiGrid, MultiTracker
-    from uav_fusion.core.estimator.runner import tracker_stream
-    from uav_fusion.core.multiscore import (
+    from uav_fusion.core.estimators.multi import MultiGrid, MultiTracker
+    from uav_fusion.core.estimators.offline import tracker_stream
+    from uav_fusion.core.records import RadarFrame
+    from uav_fusion.core.scoring.gospa import (
         MultiScoreSettings,
         UavTruth,
         epochs_from_published,
         pool,
         score_flight,
     )
-    from uav_fusion.core.records import RadarFrame
 
     t_start = time.perf_counter()
     mt = MultiTracker(profile, site)
@@ -492,7 +492,7 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
-    from uav_fusion.core.evaluation import format_table
+    from uav_fusion.core.scoring.evaluation import format_table
     from uav_fusion.nodes.bag_player import BagPlayer
     from uav_fusion.nodes.bag_recorder import BagRecorder
     from uav_fusion.nodes.evaluator_node import EvaluatorNode
@@ -616,7 +616,7 @@ def _compare_offline(
     """Score the same flight offline and report whether the live table is the same."""
     profile = profile or args.profile
     from uav_fusion.commands.evaluate import evaluate_flight
-    from uav_fusion.core.dataset import load_flight
+    from uav_fusion.core.data import load_flight
     from uav_fusion.core.site import load_site
 
     t0 = time.perf_counter()

@@ -75,7 +75,7 @@ def _fmt(R: np.ndarray) -> str:
 
 def write_r_into_profile(path: Path, radar_R: np.ndarray, rf_R: np.ndarray, note: str) -> None:
     """Replace measurement.radar.R / measurement.rf.R (and the note) of a profile YAML."""
-    from uav_fusion.core.estimator.profile import profile_from_dict
+    from uav_fusion.core.estimators.profile import profile_from_dict
 
     if not path.is_file():
         raise ConfigError(f"{path}: profile file not found")
@@ -113,8 +113,8 @@ def _replace_measurement_block(text: str, meas: dict[str, object]) -> str | None
 
 
 def run(args: argparse.Namespace) -> int:
-    from uav_fusion.core.dataset import load_flight
-    from uav_fusion.core.estimator.noise import estimate_q_from_truth, estimate_r
+    from uav_fusion.core.data import load_flight
+    from uav_fusion.core.scoring.noise import estimate_q_from_truth, estimate_r
 
     site = load_site(args.site)
     folder = Path(args.folder) if args.folder else data_path(DEFAULT_FLIGHT)

@@ -6,11 +6,17 @@ import argparse
 import time
 from pathlib import Path
 
-from uav_fusion.core import radar_class
+from uav_fusion.core.data import uav_class
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.evaluation import Evaluation, Evaluator, feed_flight, feed_steps, format_table
 from uav_fusion.core.records import Flight, Measurement
-from uav_fusion.core.report import ReportFiles, write_report
+from uav_fusion.core.scoring.evaluation import (
+    Evaluation,
+    Evaluator,
+    feed_flight,
+    feed_steps,
+    format_table,
+)
+from uav_fusion.core.scoring.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
@@ -56,7 +62,7 @@ def evaluate_flight(
     ``raw_min_uav_prob``, or the profile's ``evaluation.raw_radar_min_mean_uav_prob`` when
     that is None (every report when both are None).
     """
-    from uav_fusion.core import estimator as est
+    from uav_fusion.core import estimators as est
 
     profile = est.load_profile(profile_name)
     try:
@@ -79,7 +85,7 @@ def evaluate_flight(
     raw_thr = (
         profile.raw_radar_min_mean_uav_prob if raw_min_uav_prob is None else raw_min_uav_prob
     )
-    feed_flight(ev, flight, radar_class.uav_class_tracks(flight.radar, raw_thr))
+    feed_flight(ev, flight, uav_class.uav_class_tracks(flight.radar, raw_thr))
     feed_steps(ev, result.steps, measurements)
     info = {
         "mode": "offline (uav_fusion evaluate)",
@@ -97,7 +103,7 @@ def evaluate_flight(
 
 
 def run(args: argparse.Namespace) -> int:
-    from uav_fusion.core.dataset import load_flight
+    from uav_fusion.core.data import load_flight
 
     site = load_site(args.site)
     folder = Path(args.folder) if args.folder else data_path(DEFAULT_FLIGHT)

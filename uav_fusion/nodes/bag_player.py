@@ -29,8 +29,8 @@ from rosgraph_msgs.msg import Clock
 
 from uav_fusion.bag.reader import BagReader, BagTopic, qos_reliability, qos_transient_local
 from uav_fusion.core.errors import ConfigError, UavFusionError
+from uav_fusion.ros.app import EXIT_FAILED, EXIT_OK, App, UsageError, run_app
 from uav_fusion.ros.qos import CLOCK_QOS, make_qos
-from uav_fusion.ros.runtime import EXIT_FAILED, EXIT_OK, App, UsageError, run_app
 
 
 def message_class(msgtype: str) -> Any:

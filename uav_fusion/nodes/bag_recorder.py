@@ -31,8 +31,8 @@ from rclpy.node import Node
 from uav_fusion.bag.writer import BagWriter, WrittenBag
 from uav_fusion.core.errors import ConfigError, UavFusionError
 from uav_fusion.nodes.bag_player import message_class
+from uav_fusion.ros.app import App, UsageError, run_app
 from uav_fusion.ros.qos import make_qos, qos_words
-from uav_fusion.ros.runtime import App, UsageError, run_app
 
 #: Topics recorded by default (relative names follow the recorder's namespace; see
 #: docs/graph.md).

@@ -16,13 +16,14 @@ Subscribes (topic names are parameters; defaults from docs/graph.md):
   confirmed track at every epoch of its grid (``tracks_hz``; Odometry, ``child_frame_id``
   ``track_<id>``), scored as a set against every UAV's truth on ``truth/<vehicle>/fix``
   (the vehicles listed in ``vehicles``, or, with ``vehicles`` empty, every such topic the
-  node discovers) like the multi-UAV benchmark (:mod:`uav_fusion.core.multiscore`: GOSPA
+  node discovers) like the multi-UAV benchmark (:mod:`uav_fusion.core.scoring.gospa`: GOSPA
   with p 2, c 100 m, alpha 2; per-UAV coverage, errors, ID switches; false-track seconds).
   The epochs from the first truth sample to the last one (the report), or to the last track
   message (the periodic log and /diagnostics), are scored; an epoch without a message has no
   track.
 
-Every message goes into a :class:`uav_fusion.core.evaluation.Evaluator`; nothing is scored on
+Every message goes into a :class:`uav_fusion.core.scoring.evaluation.Evaluator`; nothing is scored
+on
 arrival, so estimates that arrive before the truth bracketing them are scored exactly once
 the report is made. Malformed messages (NaN, wrong frame, zero stamp, bad covariance) are
 counted by topic and reason and dropped. Every ``log_period_s`` the node logs a summary line
@@ -60,13 +61,13 @@ from rclpy.node import Node
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
-from uav_fusion.core.dataset import fmt_utc, load_flight
+from uav_fusion.core.data import fmt_utc, load_flight
 from uav_fusion.core.errors import UavFusionError
-from uav_fusion.core.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
-from uav_fusion.core.grid import grid_from_published, on_grid
-from uav_fusion.core.gridscore import FlightTruth, GridScore, score_grid
-from uav_fusion.core.gridscore import pool as pool_grid
-from uav_fusion.core.multiscore import (
+from uav_fusion.core.estimators.grid import grid_from_published, on_grid
+from uav_fusion.core.scoring.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
+from uav_fusion.core.scoring.fixed_rate import FlightTruth, GridScore, score_grid
+from uav_fusion.core.scoring.fixed_rate import pool as pool_grid
+from uav_fusion.core.scoring.gospa import (
     MultiScore,
     MultiScoreSettings,
     UavTruth,
@@ -74,9 +75,10 @@ from uav_fusion.core.multiscore import (
     multi_summary,
     score_flight,
 )
-from uav_fusion.core.multiscore import pool as pool_multi
-from uav_fusion.core.report import ReportFiles, write_report
+from uav_fusion.core.scoring.gospa import pool as pool_multi
+from uav_fusion.core.scoring.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
+from uav_fusion.ros.app import run_node
 from uav_fusion.ros.conversions import (
     MessageError,
     is_failed_rf,
@@ -90,7 +92,6 @@ from uav_fusion.ros.conversions import (
 from uav_fusion.ros.diagnostics import make_status
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import stream_qos
-from uav_fusion.ros.runtime import run_node
 
 M = TypeVar("M")
 

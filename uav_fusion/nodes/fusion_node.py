@@ -2,7 +2,7 @@
 
 Subscribes ``radar/pose`` (PoseWithCovarianceStamped; reports sharing one stamp form one
 radar frame of candidates) and ``rf/fix`` (PointStamped; NaN = failed attempt). Incoming
-measurements go through a :class:`~uav_fusion.core.reorder.ReorderBuffer` so that the
+measurements go through a :class:`~uav_fusion.core.live.reorder.ReorderBuffer` so that the
 estimator sees them in the same order as the offline run whatever the arrival order: an
 item is released once every input stream has moved past it, or once the watermark (latest
 stamp seen, or the simulated clock) is ``reorder_window_s`` beyond it. Items arriving later
@@ -11,7 +11,7 @@ flushed by an idle timer (``idle_flush_s`` of wall time without input), by the
 ``fusion/flush`` service (std_srvs/Trigger) and on shutdown.
 
 Time faults (duplicates, stamps far ahead, runs of late messages, the simulated clock jumping
-back) are handled by :class:`uav_fusion.core.timeline.Timeline` with this node's parameters
+back) are handled by :class:`uav_fusion.core.live.timeline.Timeline` with this node's parameters
 ``max_future_s``, ``late_run_reset`` and ``clock_jump_back_s``; it counts
 ``<source>_duplicate``, ``<source>_future``, ``clock_jumps_back`` and ``timeline_resets``.
 
@@ -22,16 +22,16 @@ reached the estimator) +
 ``buffer_pending`` + ``held_<s>`` (the last two are 0 after a flush).
 
 **Tracker profiles** (``association.mode: track_score``, e.g. ``tracker``) run the
-:class:`~uav_fusion.core.estimator.tracker.Tracker` instead, on every report of every radar
+:class:`~uav_fusion.core.estimators.tracker.Tracker` instead, on every report of every radar
 frame and every RF attempt with its quality: the node subscribes ``radar/tracks`` and
-``rf/fixes`` (sensor_msgs/PointCloud2, :mod:`uav_fusion.core.clouds`) instead of
+``rf/fixes`` (sensor_msgs/PointCloud2, :mod:`uav_fusion.core.data.clouds`) instead of
 ``radar/pose`` and ``rf/fix``. Frames and attempts go through the same timeline, so the
-tracker sees them in the offline run's order (:func:`uav_fusion.core.estimator.runner.
+tracker sees them in the offline run's order (:func:`uav_fusion.core.estimators.offline.
 tracker_stream`); empty frames and failed attempts only move their stream on (offline they
 are skipped too). A malformed point is dropped and counted (``dropped_radar_point_<reason>``)
 and the message's good points are kept. ``fusion/odom`` then carries the **fixed-rate
 output**: at every ``1 / frequency`` epoch the processed time passes, the confirmed track
-predicted to the epoch with its covariance (:class:`uav_fusion.core.grid.StepGrid`, the
+predicted to the epoch with its covariance (:class:`uav_fusion.core.estimators.grid.StepGrid`, the
 function the benchmark scores, so live equals offline), while its last accepted measurement
 is at most ``max_coast_s`` old; when the inputs stall for ``stall_timeout_s`` (and nothing is
 buffered) the epochs up to the current time (simulated clock, else wall clock; at most
@@ -73,21 +73,21 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from uav_fusion.core.errors import UavFusionError
-from uav_fusion.core.estimator import FusionEstimator, Profile, load_profile
-from uav_fusion.core.estimator.multi import GridEpoch, MultiGrid, MultiTracker
-from uav_fusion.core.estimator.runner import TrackerItem, feed_tracker, tracker_item
-from uav_fusion.core.estimator.smoothing import Filtered, FixedLagSmoother
-from uav_fusion.core.estimator.tracker import Tracker, TrackerStep, radar_model_from_profile
-from uav_fusion.core.grid import GridState, StepGrid
+from uav_fusion.core.estimators import FusionEstimator, Profile, load_profile
+from uav_fusion.core.estimators.grid import GridState, StepGrid
+from uav_fusion.core.estimators.multi import GridEpoch, MultiGrid, MultiTracker
+from uav_fusion.core.estimators.offline import TrackerItem, feed_tracker, tracker_item
+from uav_fusion.core.estimators.smoothing import Filtered, FixedLagSmoother
+from uav_fusion.core.estimators.tracker import Tracker, TrackerStep, radar_model_from_profile
+from uav_fusion.core.live.reorder import Batch, ReorderBuffer
+from uav_fusion.core.live.timeline import Timeline, TimelineConfig
 from uav_fusion.core.records import RADAR, RF, Measurement, RadarFrame
-from uav_fusion.core.reorder import Batch, ReorderBuffer
 from uav_fusion.core.site import load_site
-from uav_fusion.core.timeline import Timeline, TimelineConfig
 from uav_fusion.ros import conversions as cv
+from uav_fusion.ros.app import run_node
 from uav_fusion.ros.diagnostics import InputMonitor, make_status
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import DIAGNOSTICS_QOS, stream_qos
-from uav_fusion.ros.runtime import run_node
 from uav_fusion.ros.visualization import (
     ReportLayer,
     SiteLayer,
@@ -542,7 +542,7 @@ class FusionNode(Node):
             self.get_logger().warning(warning)
         self._bad[key] += n
 
-    # --- timeline sink (uav_fusion.core.timeline) -------------------------------------------
+    # --- timeline sink (uav_fusion.core.live.timeline) -------------------------------------------
     def process(self, batches: Sequence[Batch[Measurement]]) -> None:
         self._process(batches)
 

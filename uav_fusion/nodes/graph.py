@@ -37,8 +37,8 @@ from uav_fusion.nodes.fusion_node import FusionNode
 from uav_fusion.nodes.radar_replay import RadarReplay
 from uav_fusion.nodes.rf_replay import RfReplay
 from uav_fusion.nodes.truth_replay import TruthReplay
+from uav_fusion.ros.app import EXIT_FAILED, EXIT_OK, App, UsageError, run_app
 from uav_fusion.ros.replay import ReplayDriver, ReplayNode, flight_span
-from uav_fusion.ros.runtime import EXIT_FAILED, EXIT_OK, App, UsageError, run_app
 
 Overrides = dict[str, dict[str, Any]]
 

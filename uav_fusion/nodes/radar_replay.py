@@ -4,14 +4,14 @@ Two streams (see ``docs/graph.md``):
 
 - ``radar/pose``: the reports the track-selection policy keeps, exactly the radar
   measurements the offline runner feeds the estimator
-  (:func:`uav_fusion.core.radar_choice.selected_radar`); with the paper's policy
+  (:func:`uav_fusion.core.estimators.selection.selected_radar`); with the paper's policy
   (``largest_track``) that is the largest continuous track. Candidates of one radar frame
   share one stamp.
 - ``radar/raw``: every UAV report of every frame, before selection (the evaluator's
-  "radar raw" row, :func:`uav_fusion.core.radar_choice.raw_radar_reports`).
+  "radar raw" row, :func:`uav_fusion.core.estimators.selection.raw_radar_reports`).
 - ``radar/tracks`` (sensor_msgs/PointCloud2): every report of every frame, one cloud per
   frame, with velocity, radar track id, UAV class probability, RCS, range, Doppler and the
-  report's covariance from the profile's radar model (layout: :mod:`uav_fusion.core.clouds`):
+  report's covariance from the profile's radar model (layout: :mod:`uav_fusion.core.data.clouds`):
   what the tracker profiles consume.
 
 Covariance: the measurement's own R, else the profile's radar R. Stamps: the radar frame's
@@ -30,8 +30,8 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import PointCloud2
 
-from uav_fusion.core.estimator.profile import SELECTIONS
-from uav_fusion.core.radar_choice import (
+from uav_fusion.core.estimators.profile import SELECTIONS
+from uav_fusion.core.estimators.selection import (
     radar_profile,
     raw_radar_reports,
     report_covariance,

@@ -2,7 +2,7 @@
 
 Topic ``rf/fix``: x = east, y = north (ENU metres, site frame), z = 0.0; a failed attempt
 is published as x = y = z = NaN so subscribers can count attempts. Topic ``rf/fixes``
-(sensor_msgs/PointCloud2, one point per attempt; layout :mod:`uav_fusion.core.clouds`): the
+(sensor_msgs/PointCloud2, one point per attempt; layout :mod:`uav_fusion.core.data.clouds`): the
 same attempts with their CEP, valid and total sensor counts, measurement id, centre frequency
 and RHO, what the tracker profiles consume. Stamps are the sensor's UTC times. Parameters:
 see :func:`uav_fusion.ros.replay.replay_params` and ``docs/graph.md``.

@@ -1,6 +1,6 @@
 """truth_replay: publishes a flight's RTK truth as sensor_msgs/NavSatFix on ``truth/fix``.
 
-A flight with several UAVs (one truth file each, ``uav_fusion.core.dataset.flight``) also
+A flight with several UAVs (one truth file each, ``uav_fusion.core.data.flight``) also
 gets one topic per vehicle, ``truth/<vehicle>/fix`` (parameter ``vehicle_topic``, with
 ``{vehicle}`` in it); ``truth/fix`` stays the first UAV's. ``per_vehicle``: ``auto`` (only
 when there are several UAVs), ``always`` or ``never``.

@@ -49,9 +49,8 @@ from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamp
 from nav_msgs.msg import Odometry, Path
 from sensor_msgs.msg import NavSatFix, NavSatStatus, PointCloud2, PointField
 
-from uav_fusion.core import clouds
-from uav_fusion.core.dataset.radar import H_MAX, H_MIN
-from uav_fusion.core.encoding import (
+from uav_fusion.core.data import clouds
+from uav_fusion.core.data.encoding import (
     UNKNOWN_VARIANCE,
     MessageError,
     fix_type_from_status,
@@ -62,6 +61,7 @@ from uav_fusion.core.encoding import (
     stamp_parts,
     time_to_ns,
 )
+from uav_fusion.core.data.radar import H_MAX, H_MIN
 from uav_fusion.core.records import (
     RADAR,
     RF,
@@ -330,11 +330,11 @@ def msg_to_rf_measurement(
                        seq=seq)
 
 
-# --- every report and fix: PointCloud2 (layout: uav_fusion.core.clouds) -----------------
+# --- every report and fix: PointCloud2 (layout: uav_fusion.core.data.clouds) -----------------
 
 
 def cloud_to_msg(t: float, cloud: clouds.Cloud, frame_id: str) -> PointCloud2:
-    """A core :class:`~uav_fusion.core.clouds.Cloud` as a stamped PointCloud2."""
+    """A core :class:`~uav_fusion.core.data.clouds.Cloud` as a stamped PointCloud2."""
     msg = PointCloud2()
     msg.header.stamp = stamp_from_time(t)
     msg.header.frame_id = frame_id
@@ -476,7 +476,7 @@ def odometry_from_values(
     t: float, v: Sequence[float], frame_id: str, child_frame_id: str
 ) -> Odometry:
     """Odometry from a step's packed values (x[0:6], then P's 21-entry upper triangle,
-    :attr:`uav_fusion.core.estimator.Step.values`): the message :func:`state_to_odometry`
+    :attr:`uav_fusion.core.estimators.Step.values`): the message :func:`state_to_odometry`
     builds, without building the 6x6 arrays."""
     u = UNKNOWN_VARIANCE
     msg = Odometry()

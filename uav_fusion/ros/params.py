@@ -7,7 +7,7 @@ go into the ROS descriptor (``FloatingPointRange`` / ``IntegerRange``, visible t
 ``successful=False`` with the reason). Choices and other checks that a range cannot express
 are enforced by an on-set callback installed here. A bad value at start-up raises
 :class:`ParamError` naming the parameter, the value and what is allowed; the node runtime
-(:mod:`uav_fusion.ros.runtime`) logs it and exits with status 2.
+(:mod:`uav_fusion.ros.app`) logs it and exits with status 2.
 """
 
 from __future__ import annotations

@@ -39,14 +39,14 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rosgraph_msgs.msg import Clock
 
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+from uav_fusion.ros.app import run_node
 from uav_fusion.ros.conversions import ns_to_time, stamp_from_time
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import CLOCK_QOS, stream_qos
-from uav_fusion.ros.runtime import run_node
 
 
 def replay_params(publish_clock: bool) -> list[Param]:

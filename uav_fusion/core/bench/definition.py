@@ -21,12 +21,12 @@ Keys (unknown keys are errors naming the file and the key):
 ``targets``
     ``single`` (default: one UAV, scored on its fixed-rate output) or ``multi`` (flights with
     several UAVs, scored as a set of targets: GOSPA, per-UAV coverage, ID switches, false
-    tracks; see :mod:`uav_fusion.core.multiscore`);
+    tracks; see :mod:`uav_fusion.core.scoring.gospa`);
 ``scoring``
     ``grid_hz`` (10; 1 for ``multi``), ``airborne_min_m`` (5), ``fresh_age_s`` (1),
     ``gross_error_m`` (100), ``observable_window_s`` (2), ``nees_probability`` (0.95),
     ``excuse_grounded`` (true; ``multi`` only: a track on a UAV that is not airborne is
-    excused rather than false, see :mod:`uav_fusion.core.multiscore`).
+    excused rather than false, see :mod:`uav_fusion.core.scoring.gospa`).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.gridscore import ScoreSettings
+from uav_fusion.core.scoring.fixed_rate import ScoreSettings
 from uav_fusion.core.yamlio import read_yaml_file
 from uav_fusion.resources import bench_path, config_path
 

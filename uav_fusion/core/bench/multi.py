@@ -1,8 +1,8 @@
 """The multi-UAV benchmark: the multi-UAV tracker over flights with several UAVs.
 
-One task runs :class:`~uav_fusion.core.estimator.multi.MultiTracker` over one cached flight
+One task runs :class:`~uav_fusion.core.estimators.multi.MultiTracker` over one cached flight
 (``run_multi`` on the grid of the definition's ``grid_hz`` over the span of every UAV's truth)
-and scores its confirmed tracks as a set (:func:`~uav_fusion.core.multiscore.score_flight`:
+and scores its confirmed tracks as a set (:func:`~uav_fusion.core.scoring.gospa.score_flight`:
 GOSPA with p 2, c 100 m, alpha 2; per-UAV coverage, errors, ID switches, fragmentations;
 false-track seconds). It adds what only the twin knows:
 
@@ -45,20 +45,20 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from uav_fusion.core.bench.cache import CachedFlight, read_vehicle_labels
-from uav_fusion.core.dataset import load_flight
+from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
-from uav_fusion.core.estimator.multi import MultiTracker, run_multi
-from uav_fusion.core.estimator.profile import Profile
-from uav_fusion.core.estimator.runner import tracker_stream
-from uav_fusion.core.metrics import interpolate_truth
-from uav_fusion.core.multiscore import (
+from uav_fusion.core.estimators.multi import MultiTracker, run_multi
+from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.records import Flight
+from uav_fusion.core.scoring.gospa import (
     FlightSamples,
     MultiScoreSettings,
     UavTruth,
     pool,
     score_flight,
 )
-from uav_fusion.core.records import Flight
+from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin.writers import MANIFEST
 
@@ -292,7 +292,7 @@ class MultiBenchScore:
     err_mean_m: float
     err_p95_m: float
     id_switches: int  # on GOSPA's assignment per epoch
-    id_switches_kept: int  # on the CLEAR MOT correspondence (core/multiscore.py)
+    id_switches_kept: int  # on the CLEAR MOT correspondence (core/scoring/gospa.py)
     crossings: int
     crossings_over_one: int  # crossings with more than one ID switch (per-epoch assignment)
     crossings_over_one_kept: int  # ... on the kept correspondence

@@ -17,8 +17,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from uav_fusion.core.bench.run import FlightResult
-from uav_fusion.core.gridscore import (
+from uav_fusion.core.bench.single import FlightResult
+from uav_fusion.core.scoring.fixed_rate import (
     TABLE_COLUMNS,
     GridScore,
     ScoreSettings,

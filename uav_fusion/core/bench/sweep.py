@@ -16,16 +16,17 @@ A sweep spec (YAML, e.g. ``bench/sweep_q.yaml``) names:
 ``parameters``
     a mapping from a profile parameter (:data:`PARAMETERS`) to the list of values to try;
     with a multi-UAV definition also ``multi.<key>``, any key of the profile's ``multi``
-    section (:class:`~uav_fusion.core.estimator.multi_settings.MultiSettings`); every
+    section (:class:`~uav_fusion.core.estimators.multi_settings.MultiSettings`); every
     combination is run with every profile on every flight;
 ``metric``
-    the figure plotted against each parameter (a :class:`~uav_fusion.core.gridscore.GridScore`
+    the figure plotted against each parameter (a
+    :class:`~uav_fusion.core.scoring.fixed_rate.GridScore`
     field, default ``err_mean_m``; with a multi-UAV definition a
     :class:`~uav_fusion.core.bench.multi.MultiBenchScore` field, default ``gospa_mean_m``).
 
 Each task (one flight, one profile, one combination) loads the flight from the benchmark's
 cache (generating it if missing), runs the estimator and scores its fixed-rate output with the
-benchmark's metrics (:func:`uav_fusion.core.bench.run.score_task`; a multi-UAV definition's
+benchmark's metrics (:func:`uav_fusion.core.bench.single.score_task`; a multi-UAV definition's
 flights run the multi-UAV tracker and are scored as a set of targets,
 :func:`uav_fusion.core.bench.multi.multi_score_task`, each flight's figures on their own).
 Its result is keyed by a hash of its inputs (the flight's cache key, the profile file's
@@ -59,11 +60,11 @@ from uav_fusion.core.bench.multi import (
     multi_score_task,
     pool_multi,
 )
-from uav_fusion.core.bench.run import ScoreTask, score_task
+from uav_fusion.core.bench.single import ScoreTask, score_task
 from uav_fusion.core.errors import ConfigError, UavFusionError
-from uav_fusion.core.estimator.multi_settings import check_value
-from uav_fusion.core.estimator.profile import Profile, load_profile, profile_path
-from uav_fusion.core.gridscore import GridScore, ScoreSettings, pool
+from uav_fusion.core.estimators.multi_settings import check_value
+from uav_fusion.core.estimators.profile import Profile, load_profile, profile_path
+from uav_fusion.core.scoring.fixed_rate import GridScore, ScoreSettings, pool
 from uav_fusion.core.site import Site
 from uav_fusion.core.yamlio import read_yaml_file
 

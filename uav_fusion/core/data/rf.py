@@ -1,0 +1,182 @@
+"""Reader of the Keysight N6854A geolocation CSV (``AADM.csv`` / ``AADM_rerun.csv``).
+
+Header (names may carry stray spaces, matched without case)::
+
+    Meas ID,Algorithm,Center Frequency,Sample Rate,Num Samples,Latitude,Longitude,Elevation,
+    RHO,CEP,Total Sensors,Valid Sensors,Overloaded Sensors,Sensor Names,Time,Comment
+
+Required columns: Meas ID, Latitude, Longitude, Time. CEP, Total Sensors, Valid Sensors,
+Center Frequency (Hz) and RHO are kept when present. ``Time`` is the file clock (UTC for
+these files) such as
+``2025-10-07 19:42:20.000``; UTC = file time − ``site.clock_offset_s("rf")``.
+
+A failed attempt (Latitude = Longitude = 0) is kept as ``RfAttempt(ok=False)`` with NaN
+east/north: it counts as an attempt, never as a position. RF fixes are 2D; their east/north
+are computed at the ENU origin's height ``site.h0`` (the filter uses only e, n). Reading them
+at h0 rather than at the flight height (up to 200 m above) moves e, n by at most 0.07 m at
+2.1 km from the origin: nothing against RF errors of tens of metres.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from uav_fusion.core.data._source import (
+    Source,
+    TimeOrder,
+    csv_fields,
+    parse_clock_time,
+    to_float,
+    to_int,
+)
+from uav_fusion.core.errors import DataError
+from uav_fusion.core.records import LoadReport, RfAttempt
+from uav_fusion.core.site import Site
+
+REQUIRED = ("Meas ID", "Latitude", "Longitude", "Time")
+OPTIONAL = ("CEP", "Total Sensors", "Valid Sensors", "Center Frequency", "RHO")
+
+
+def _key(name: str) -> str:
+    return " ".join(name.split()).lower()
+
+
+def read_rf_csv(
+    path: str | Path, site: Site, *, strict: bool = False
+) -> tuple[list[RfAttempt], LoadReport]:
+    """Read one Keysight RF CSV into RF attempts (failed ones included) in UTC.
+
+    Skip reasons (lenient mode): ``bad_header`` (every row, when the header lacks a
+    required column or is not CSV), ``bad_csv`` (a carriage return inside an unquoted
+    field, a field beyond the ``csv`` module's size limit), ``bad_columns``, ``truncated``,
+    ``bad_value``, ``bad_time``, ``nonfinite``, ``out_of_range``, ``time_backwards``,
+    ``duplicate_time``.
+    """
+    src = Source(path, strict)
+    rep = src.report
+    if not src.lines:
+        src.empty("empty file: no header line")
+        return [], src.finish()
+
+    hline, htext = src.lines[0]
+    header, bad_header = csv_fields(htext)
+    col = {_key(h): i for i, h in enumerate(header or []) if h.strip()}
+    missing = [c for c in REQUIRED if _key(c) not in col]
+    rows = src.lines[1:]
+    rep.rows = len(rows)
+    if header is None or missing:
+        if header is None:
+            what = f"header line is not CSV: {bad_header}"
+        else:
+            found = ", ".join(repr(h.strip()) for h in header)
+            what = (
+                f"header lacks column(s) {', '.join(repr(m) for m in missing)}; found: {found}"
+            )
+        if strict:
+            raise DataError(src.path, hline, what)
+        rep.skipped["bad_header"] += len(rows)
+        rep.notes.append(f"line {hline}: {what}; no row could be read")
+        return [], src.finish()
+
+    i_id, i_lat, i_lon, i_time = (col[_key(c)] for c in REQUIRED)
+    i_cep, i_tot, i_val, i_freq, i_rho = (col.get(_key(c)) for c in OPTIONAL)
+    n_cols = len(header)
+    offset = site.clock_offset_s("rf")
+    order = TimeOrder(src)
+
+    kept: list[
+        tuple[float, int, float, float, float | None, int | None, int | None, int,
+              float | None, float | None]
+    ] = []
+    for line, text in rows:
+        f, not_csv = csv_fields(text)
+        if f is None:
+            src.bad(line, "bad_csv", str(not_csv))
+            continue
+        if len(f) != n_cols and not (len(f) > n_cols and not any(x.strip() for x in f[n_cols:])):
+            src.bad(line, "bad_columns", f"{len(f)} fields, the header has {n_cols}")
+            continue
+        meas_id = to_int(f[i_id])
+        if meas_id is None:
+            src.bad(line, "bad_value", f"Meas ID {f[i_id].strip()!r} is not an integer")
+            continue
+        lat, lon = to_float(f[i_lat]), to_float(f[i_lon])
+        if lat is None or lon is None:
+            src.bad(
+                line,
+                "bad_value",
+                f"Latitude/Longitude {f[i_lat].strip()!r}, {f[i_lon].strip()!r} not numbers",
+            )
+            continue
+        if not (math.isfinite(lat) and math.isfinite(lon)):
+            src.bad(line, "nonfinite", f"Latitude/Longitude {lat}, {lon} not finite")
+            continue
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            src.bad(line, "out_of_range", f"Latitude/Longitude {lat}, {lon} out of range")
+            continue
+        parsed = parse_clock_time(f[i_time])
+        if parsed is None:
+            src.bad(line, "bad_time", f"Time {f[i_time].strip()!r} is not a plausible time")
+            continue
+        t = parsed[0] - (offset if parsed[1] != "zoned" else 0.0)
+        if not order.accept(t, line):
+            continue
+        cep = _opt_float(src, line, f, i_cep, "CEP")
+        tot = _opt_int(src, line, f, i_tot, "Total Sensors")
+        val = _opt_int(src, line, f, i_val, "Valid Sensors")
+        freq = _opt_float(src, line, f, i_freq, "Center Frequency")
+        rho = _opt_float(src, line, f, i_rho, "RHO")
+        kept.append((t, meas_id, lat, lon, cep, tot, val, line, freq, rho))
+
+    lat_a = np.array([k[2] for k in kept], dtype=float)
+    lon_a = np.array([k[3] for k in kept], dtype=float)
+    ok_a = ~((lat_a == 0.0) & (lon_a == 0.0))
+    e_a = np.full(lat_a.size, np.nan)
+    n_a = np.full(lat_a.size, np.nan)
+    if ok_a.any():
+        e, n, _ = site.to_enu(lat_a[ok_a], lon_a[ok_a], np.full(int(ok_a.sum()), site.h0))
+        e_a[ok_a], n_a[ok_a] = e, n
+    out = [
+        RfAttempt(
+            t=k[0],
+            meas_id=k[1],
+            ok=bool(ok_a[j]),
+            lat=k[2],
+            lon=k[3],
+            e=float(e_a[j]),
+            n=float(n_a[j]),
+            cep=k[4],
+            valid_sensors=k[6],
+            total_sensors=k[5],
+            line=k[7],
+            center_freq_hz=k[8],
+            rho=k[9],
+        )
+        for j, k in enumerate(kept)
+    ]
+    rep.used = len(out)
+    n_failed = int((~ok_a).sum())
+    rep.notes.append(f"{len(out)} attempts, {n_failed} failed (Latitude = Longitude = 0)")
+    return out, src.finish()
+
+
+def _opt_float(src: Source, line: int, f: list[str], i: int | None, name: str) -> float | None:
+    if i is None or i >= len(f) or not f[i].strip():
+        return None
+    x = to_float(f[i])
+    if x is None:
+        src.soft(line, f"{name} {f[i].strip()!r} is not a number")
+        return None
+    return x if math.isfinite(x) else None
+
+
+def _opt_int(src: Source, line: int, f: list[str], i: int | None, name: str) -> int | None:
+    if i is None or i >= len(f) or not f[i].strip():
+        return None
+    x = to_int(f[i])
+    if x is None:
+        src.soft(line, f"{name} {f[i].strip()!r} is not an integer")
+    return x

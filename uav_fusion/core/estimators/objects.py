@@ -1,0 +1,495 @@
+"""Every radar object, and how UAV-like it is: the evidence behind track-level association.
+
+The radar's onboard tracker gives each report a track id. :class:`ObjectTable` keeps one
+:class:`RadarObject` per id for the whole flight (its own small CV filter, so multi-target
+tracking is an extension, not a rewrite) and a *UAV score* per object, a sum of log-odds-like
+terms from independent cues (no single cue decides; the radar's classifier errs both ways):
+
+* class history: exponential moving average (time constant ``class_tau_s``) of the logit of
+  the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``. With
+  ``class_prior_logit`` set, each report's logit is first read for the radar track's age: a
+  radar classifier has few features on a young track, so its output starts at a prior and
+  moves towards the object's class as features accumulate. A report at age ``a`` (since the
+  object's first report) counts as ``prior + (logit - prior) / w`` with ``w = max(
+  class_min_weight, 1 - exp(-a / class_age_tau_s))`` (the UAV's young track at class
+  probability 0.4 says more than an old one at 0.4), and the history starts at the prior
+  instead of at the first report; with ``class_range_scale_m`` (set by the multi-UAV
+  tracker, not a profile key) ``w`` is also multiplied by ``exp(-range / class_range_scale_m)``
+  while the object is younger than ``class_range_age_s`` (the report's own ``range``; a far
+  track's classifier has fewer features, so its output leaves the prior more slowly);
+* kinematics: an object whose mean height (moving average of its reports' ENU up) lies
+  below the ground by more than ``below_ground_m``, and by more than ``below_ground_sigmas``
+  times the mean vertical standard deviation of its reports (from the radar's polar R: a few
+  metres close in, tens of metres near the horizon far out, where a UAV's low pass scatters
+  below the ground), is a multipath ghost (``-below_ground_weight``); one older than
+  ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is
+  clutter (``-stationary_weight``); one that moves but stays below ``ground_alt_m`` is a
+  ground vehicle (``-ground_weight``) if its mean RCS is at least ``vehicle_min_rcs_dbsm``
+  (a car is a large radar target; a small UAV taking off, or flying low far out where its
+  reports scatter around the ground, is not; the default -100 dBsm takes every object, and
+  one without RCS reports counts as large), unless its mean height has once stood more than
+  ``ground_release_sigmas`` (0: off) times its reports' mean vertical standard deviation
+  above ``ground_alt_m`` (:attr:`RadarObject.aloft`: a car never climbs, while a UAV flying
+  low far out has reports that scatter around the ground after it was seen in the air); one
+  whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
+  ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
+  bird (``-erratic_weight``);
+* size: an object whose mean RCS (moving average of its reports' dBsm) is at least
+  ``large_rcs_dbsm`` is too large for a small UAV (``-large_rcs_weight``; a reflector, a
+  car); one without RCS reports is not judged;
+* RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
+  horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
+  capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
+  evidence of a UAV); with ``rf_nearest_only`` a fix credits only the object it fits best
+  (smallest gate distance), not every object in its gate (clutter beside a UAV, or near a
+  UAV on its pad that the radar does not see, would share the UAV's emitter); a fix too
+  coarse to update a track (CEP above the profile's ``measurement.rf.max_cep_m``) still
+  counts here when its CEP is at most ``rf_support_max_cep_m`` (0: never; single-UAV
+  tracker only); a fix that credits no object at all (an emitter the radar does not see
+  yet: a UAV on its pad with its link on) is kept for ``rf_memory_s`` (0: not kept), and an
+  object seen for the first time takes the support of the kept fixes inside its gate, as
+  if it had been credited when each was made (decayed since). A fix given with its emitter's
+  key (the multi-UAV tracker) leaves that key on the objects it credits
+  (:attr:`RadarObject.rf_key`, the last one);
+* agreement with the fused track: moving average of "this object's report had an NIS of at
+  most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
+  the track's R allows for correlated errors), times ``fused_weight``; nothing is recorded
+  while the track's horizontal position standard deviation exceeds ``lost_sigma_m`` (0: no
+  limit; after a long coast the gate spans far more than the UAV's neighbourhood, and a
+  first report inside it would count as full agreement: ``Tracker``);
+* age: ``age_weight * min(1, age / age_full_s)`` (a track that persists is more likely real).
+
+A *coasted* report is one whose velocity and RCS repeat the same radar track's previous report
+exactly: the radar's own tracker had no detection for it and reported its prediction
+(:attr:`RadarObject.coasting`). It carries no new measurement; with ``skip_radar_coasts`` the
+fused track does not take it (it would count the radar's prediction as a fresh measurement
+with independent noise), and neither does the object's own filter (its state then stays at
+its last report that was not a coast, :attr:`RadarObject.kf_t`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from uav_fusion.core.estimators.components import RadarRModel
+from uav_fusion.core.estimators.kalman import CvKalman, PackedR
+from uav_fusion.core.records import RadarTrack
+
+RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
+
+
+@dataclass(frozen=True)
+class ScoreConfig:
+    """Weights and thresholds of the UAV score (``association`` keys of a profile)."""
+
+    class_weight: float = 1.0
+    class_tau_s: float = 8.0
+    class_clip: float = 3.0
+    stationary_speed_mps: float = 1.5
+    stationary_min_age_s: float = 8.0
+    stationary_weight: float = 5.0
+    ground_alt_m: float = 4.0
+    ground_weight: float = 3.0
+    ground_release_sigmas: float = 0.0
+    vehicle_min_rcs_dbsm: float = -100.0  # -100: every low moving object may be a vehicle
+    below_ground_m: float = 5.0
+    below_ground_weight: float = 8.0
+    below_ground_sigmas: float = 0.0
+    erratic_nis: float = 6.0
+    bird_rcs_dbsm: float = -15.0
+    erratic_weight: float = 2.0
+    large_rcs_dbsm: float = 100.0  # 100: off
+    large_rcs_weight: float = 5.0
+    rf_weight: float = 1.0
+    rf_tau_s: float = 30.0
+    rf_max: float = 3.0
+    rf_window_s: float = 3.0
+    rf_support_max_cep_m: float = 0.0
+    rf_memory_s: float = 0.0
+    fused_weight: float = 1.5
+    fused_tau_s: float = 10.0
+    fused_nis: float = 3.0
+    lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
+    reach_margin_m: float = 0.0  # single-UAV tracker: 0: no reach gate (Tracker._reachable)
+    age_weight: float = 0.5
+    age_full_s: float = 10.0
+    object_q: float = 5.0
+    object_floor_m: float = 10.0
+    speed_tau_s: float = 5.0
+    follow_min: float = 0.0
+    init_min: float = 1.0
+    init_min_reports: int = 4
+    skip_radar_coasts: bool = False
+    rf_nearest_only: bool = False
+    challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
+    challenge_margin: float = 0.5
+    # a young radar track's class output leans to the classifier's prior (module text); None:
+    # every report's logit taken as it is
+    class_prior_logit: float | None = None
+    class_age_tau_s: float = 4.0
+    class_min_weight: float = 0.4
+    # ... and, while the object is younger than class_range_age_s, for its range: the weight is
+    # also multiplied by exp(-range / class_range_scale_m) (0: off). Not profile keys: the
+    # multi-UAV tracker sets them (MultiSettings); module text
+    class_range_scale_m: float = 0.0
+    class_range_age_s: float = 0.0
+
+
+#: ScoreConfig fields that are not ``association`` keys of a profile.
+_NOT_PROFILE_KEYS = ("class_range_scale_m", "class_range_age_s")
+
+
+
+def score_keys() -> tuple[str, ...]:
+    """The profile keys of :class:`ScoreConfig` (``association.<key>``)."""
+    return tuple(f.name for f in fields(ScoreConfig) if f.name not in _NOT_PROFILE_KEYS)
+
+
+def _ema(old: float, new: float, dt: float, tau: float) -> float:
+    if tau <= 0:
+        return new
+    a = math.exp(-dt / tau) if dt > 0 else 1.0
+    return a * old + (1.0 - a) * new
+
+
+class RadarObject:
+    """One radar track id: its own CV filter and the running evidence of the UAV score."""
+
+    __slots__ = (
+        "aloft",
+        "class_logit",
+        "coasting",
+        "first_t",
+        "fused",
+        "fused_t",
+        "id",
+        "kf",
+        "kf_t",
+        "last_t",
+        "n_reports",
+        "nis_mean",
+        "rcs_mean",
+        "rcs_seen",
+        "rf_key",
+        "rf_support",
+        "rf_t",
+        "sd_up",
+        "signature",
+        "speed",
+        "up",
+    )
+
+    def __init__(self, track_id: int, t: float) -> None:
+        self.id = track_id
+        self.first_t = t
+        self.last_t = t
+        self.n_reports = 0
+        self.kf: CvKalman | None = None
+        self.kf_t = t  # the time of the filter's state (its last non-coasted report)
+        self.class_logit = 0.0
+        self.speed = 0.0
+        self.up = 0.0
+        self.sd_up = 0.0  # moving average of the reports' vertical standard deviation
+        self.nis_mean = 3.0
+        self.rcs_mean = 0.0
+        self.rcs_seen = False  # any report with a finite RCS
+        self.rf_support = 0.0
+        self.rf_t = t
+        self.rf_key: str | None = None  # the emitter of the last RF fix that credited it
+        self.fused = 0.0
+        self.fused_t: float | None = None
+        self.signature: tuple[object, ...] | None = None
+        self.coasting = False
+        self.aloft = False  # its mean height once stood clearly above ground_alt_m
+
+    @property
+    def age_s(self) -> float:
+        return self.last_t - self.first_t
+
+    def rf_support_at(self, t: float, tau: float) -> float:
+        if self.rf_support == 0.0:
+            return 0.0
+        return self.rf_support * math.exp(-(t - self.rf_t) / tau) if tau > 0 else 0.0
+
+    def below_ground(self, cfg: ScoreConfig) -> bool:
+        """Clearly below the ground (see the module text): nothing real flies there."""
+        lim = cfg.below_ground_m
+        k = cfg.below_ground_sigmas
+        if k and k * self.sd_up > lim:
+            lim = k * self.sd_up
+        return self.up < -lim
+
+    def score(self, cfg: ScoreConfig) -> float:
+        """The UAV score at the object's last report (see the module text)."""
+        s = cfg.class_weight * self.class_logit
+        age = self.age_s
+        if self.below_ground(cfg):  # a multipath ghost
+            s -= cfg.below_ground_weight
+        elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
+            s -= cfg.stationary_weight
+        elif (
+            self.up < cfg.ground_alt_m
+            and self.n_reports > 1
+            and not self.aloft
+            and self.rcs_mean >= cfg.vehicle_min_rcs_dbsm
+        ):
+            s -= cfg.ground_weight
+        if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
+            s -= cfg.erratic_weight
+        if self.rcs_seen and self.rcs_mean >= cfg.large_rcs_dbsm:
+            s -= cfg.large_rcs_weight
+        # min(rf_max, rf_support_at(last_t)) and min(1, age / age_full_s) as conditionals
+        sup = self.rf_support
+        if sup != 0.0:
+            tau = cfg.rf_tau_s
+            sup = sup * math.exp(-(self.last_t - self.rf_t) / tau) if tau > 0 else 0.0
+        rf_max = cfg.rf_max
+        s += cfg.rf_weight * (sup if sup < rf_max else rf_max)
+        s += cfg.fused_weight * self.fused
+        full = cfg.age_full_s
+        if full > 0:
+            f = age / full
+            s += cfg.age_weight * (f if f < 1.0 else 1.0)
+        return s
+
+
+class ObjectTable:
+    """Every radar object of a flight, updated by every report of every frame."""
+
+    def __init__(self, cfg: ScoreConfig, radar_r: RadarRModel) -> None:
+        self.cfg = cfg
+        self.radar_r = radar_r
+        self.objects: dict[int, RadarObject] = {}
+        # RF fixes that credited no object: (t, e, n, variance, emitter)
+        self._orphans: list[tuple[float, float, float, float, str | None]] = []
+
+    def update(
+        self,
+        trk: RadarTrack,
+        r: PackedR | None = None,
+        z: tuple[float, float, float] | None = None,
+    ) -> RadarObject:
+        """Fold one report (with its R, computed here when not given; at the position ``z``
+        when given: the report corrected for the radar's misalignment) into its object
+        (created on first sight)."""
+        cfg = self.cfg
+        tid = trk.track_id
+        obj = self.objects.get(tid)
+        t = trk.t
+        if obj is None:
+            obj = self.objects[tid] = RadarObject(tid, t)
+        dt = t - obj.last_t
+        if z is None:
+            e = trk.e
+            n = trk.n
+            u = trk.u
+        else:
+            e, n, u = z
+        if r is None:
+            r = self.radar_r.r_at(e, n, u)
+        if obj.kf is None and self._orphans:
+            self._adopt_orphans(obj, t, e, n, r)
+        kf = obj.kf
+        n_reports = obj.n_reports
+        rcs = trk.rcs_dbsm
+        vel = trk.vel_ned
+        sig = (vel, rcs)
+        old = obj.signature
+        coast = old is not None and vel is not None and sig == old
+        if kf is None or dt < 0:
+            q = cfg.object_q
+            kf = obj.kf = CvKalman((q, q, q))
+            kf.x = [e, n, u, 0.0, 0.0, 0.0]
+            v = 100.0
+            kf.P = [
+                r[0], r[1], r[2], 0.0, 0.0, 0.0,
+                r[3], r[4], 0.0, 0.0, 0.0,
+                r[5], 0.0, 0.0, 0.0,
+                v, 0.0, 0.0,
+                v, 0.0,
+                v,
+            ]  # fmt: skip
+            dt = 0.0
+            obj.kf_t = t
+            obj.up = u
+            obj.sd_up = math.sqrt(r[5])
+            if rcs is not None and math.isfinite(rcs):
+                obj.rcs_mean = rcs
+                obj.rcs_seen = True
+            else:
+                obj.rcs_mean = 0.0
+            # one smoothing factor per time constant for this interval (the EMAs below)
+            a = 0.0 if cfg.speed_tau_s <= 0 else 1.0
+            b = 1.0 - a
+        else:
+            # one smoothing factor per time constant for this interval (the EMAs below)
+            tau = cfg.speed_tau_s
+            a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
+            b = 1.0 - a
+            if not (coast and cfg.skip_radar_coasts):
+                # a coast is the radar's own prediction: no new measurement for the filter
+                nis = kf.predict_update3(t - obj.kf_t, e, n, u, r)
+                obj.kf_t = t
+                if math.isfinite(nis):
+                    # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
+                    obj.nis_mean = a * obj.nis_mean + b * (100.0 if nis > 100.0 else nis)
+        if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
+            vn, ve, vd = vel
+            spd = math.sqrt(vn * vn + ve * ve + vd * vd)
+        else:
+            x = kf.x
+            spd = math.sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5])
+        if n_reports == 0:
+            obj.speed = spd
+        else:
+            obj.speed = a * obj.speed + b * spd
+            obj.up = a * obj.up + b * u
+            obj.sd_up = a * obj.sd_up + b * math.sqrt(r[5])
+            if rcs is not None and math.isfinite(rcs):
+                if obj.rcs_seen:
+                    obj.rcs_mean = a * obj.rcs_mean + b * rcs
+                else:
+                    obj.rcs_mean = rcs
+                    obj.rcs_seen = True
+            k = cfg.ground_release_sigmas
+            if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
+                obj.aloft = True
+        p = trk.uav_prob
+        if p is not None and math.isfinite(p):
+            # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
+            c = cfg.class_clip
+            pc = 1e-6 if p < 1e-6 else p
+            if pc > 1.0 - 1e-6:
+                pc = 1.0 - 1e-6
+            lg = math.log(pc / (1.0 - pc))
+            prior = cfg.class_prior_logit
+            if prior is not None:
+                # the report's distance from the prior, for the track's age
+                age = t - obj.first_t
+                w = 1.0 - math.exp(-age / cfg.class_age_tau_s)
+                rng_m = trk.range_m
+                if (
+                    age < cfg.class_range_age_s
+                    and cfg.class_range_scale_m > 0.0
+                    and rng_m is not None
+                    and math.isfinite(rng_m)
+                ):
+                    # a far track's classifier has fewer features to go on: its output leaves
+                    # the prior more slowly
+                    w *= math.exp(-rng_m / cfg.class_range_scale_m)
+                if w < cfg.class_min_weight:
+                    w = cfg.class_min_weight
+                lg = prior + (lg - prior) / w
+            if c < lg:
+                lg = c
+            if -c > lg:
+                lg = -c
+            if n_reports == 0:  # with a prior (and a history) the history starts there
+                obj.class_logit = lg if prior is None or cfg.class_tau_s <= 0 else prior
+            else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
+                tau = cfg.class_tau_s
+                if tau <= 0:
+                    obj.class_logit = lg
+                else:
+                    a = math.exp(-dt / tau) if dt > 0 else 1.0
+                    obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
+        obj.coasting = coast
+        obj.signature = sig
+        obj.n_reports = n_reports + 1
+        obj.last_t = t
+        return obj
+
+    def mark_fused(self, obj: RadarObject, inside: bool, t: float) -> None:
+        """Record whether the object's report at ``t`` fell inside the UAV track's gate."""
+        v = 1.0 if inside else 0.0
+        last = obj.fused_t
+        if last is None:
+            obj.fused = v
+        else:  # _ema(obj.fused, v, t - last, fused_tau_s), inlined
+            tau = self.cfg.fused_tau_s
+            if tau <= 0:
+                obj.fused = v
+            else:
+                dt = t - last
+                a = math.exp(-dt / tau) if dt > 0 else 1.0
+                obj.fused = a * obj.fused + (1.0 - a) * v
+        obj.fused_t = t
+
+    def rf_fix(
+        self, t: float, e: float, n: float, var_m2: float, key: str | None = None
+    ) -> int:
+        """Credit every recent object whose predicted position agrees with an RF fix (of the
+        emitter ``key``, when known); returns the number of objects credited."""
+        cfg = self.cfg
+        hits = 0
+        best: tuple[float, RadarObject] | None = None
+        for obj in self.objects.values():
+            kf = obj.kf
+            if kf is None or abs(t - obj.last_t) > cfg.rf_window_s:
+                continue
+            dt = t - obj.kf_t  # from the filter's own time (coasts leave it behind)
+            x = kf.x
+            p = kf.P
+            de = e - (x[0] + dt * x[3])
+            dn = n - (x[1] + dt * x[4])
+            # object position variance (horizontal, with the velocity's share over dt)
+            s00 = p[0] + 2 * dt * p[3] + dt * dt * p[15] + var_m2
+            s11 = p[6] + 2 * dt * p[9] + dt * dt * p[18] + var_m2
+            s01 = p[1] + dt * (p[4] + p[8]) + dt * dt * p[16]
+            det = s00 * s11 - s01 * s01
+            if det <= 0:
+                continue
+            d2 = (s11 * de * de - 2.0 * s01 * de * dn + s00 * dn * dn) / det
+            if d2 <= RF_GATE_99_2DOF:
+                if cfg.rf_nearest_only:
+                    if best is None or d2 < best[0]:
+                        best = (d2, obj)
+                    continue
+                obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
+                obj.rf_t = t
+                obj.rf_key = key
+                hits += 1
+        if best is not None:
+            obj = best[1]
+            obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
+            obj.rf_t = t
+            obj.rf_key = key
+            hits += 1
+        if hits == 0 and cfg.rf_memory_s > 0:
+            keep = t - cfg.rf_memory_s
+            self._orphans = [o for o in self._orphans if o[0] >= keep]
+            self._orphans.append((t, e, n, var_m2, key))
+        return hits
+
+    def _adopt_orphans(
+        self, obj: RadarObject, t: float, e: float, n: float, r: PackedR
+    ) -> None:
+        """Give a new object the support of the kept fixes that credited nobody and fall
+        inside its gate (first report ``e``, ``n`` with R ``r``); those fixes are used up."""
+        cfg = self.cfg
+        keep = t - cfg.rf_memory_s
+        left: list[tuple[float, float, float, float, str | None]] = []
+        sup = 0.0
+        key: str | None = None
+        for o in self._orphans:
+            tf, fe, fn, var, k = o
+            if tf < keep:
+                continue
+            s00 = r[0] + var
+            s11 = r[3] + var
+            s01 = r[1]
+            det = s00 * s11 - s01 * s01
+            de = fe - e
+            dn = fn - n
+            q = s11 * de * de - 2.0 * s01 * de * dn + s00 * dn * dn
+            if det > 0 and q / det <= RF_GATE_99_2DOF:
+                sup += math.exp(-(t - tf) / cfg.rf_tau_s) if cfg.rf_tau_s > 0 else 0.0
+                key = k
+            else:
+                left.append(o)
+        self._orphans = left
+        if sup:
+            obj.rf_support = sup
+            obj.rf_t = t
+            obj.rf_key = key

@@ -1,0 +1,174 @@
+"""Which radar reports go where, and the paper estimator's measurement stream.
+
+A flight's radar file gives three streams (``docs/graph.md``):
+
+- the **selected** reports: the radar frames (lists of candidates sharing one stamp) the
+  profile's track selection keeps, exactly the radar measurements the paper's estimator is
+  fed (:func:`flight_measurements`); with the paper's policy (``largest_track``) that is the
+  largest continuous track, chosen with knowledge of the whole flight like the paper did;
+- the **raw** reports: every report of the tracks classed as the UAV's by the profile's
+  ``evaluation.raw_radar_min_mean_uav_prob`` (:mod:`uav_fusion.core.data.uav_class`), before
+  selection: the evaluator's "radar raw" row;
+- every report of every frame, unselected: ``radar/tracks`` (:mod:`uav_fusion.core.data.clouds`),
+  each report with the covariance of :func:`report_covariance`.
+
+Users: ``radar_replay`` (``radar/pose``, ``radar/raw``, ``radar/tracks``), the bag converter
+(the same three topics), ``uav_fusion evaluate`` and ``uav_fusion calibrate``.
+
+Order of the stream is total and deterministic: time, then source (radar before RF at equal
+times), then position in the source file. ``seq`` numbers the measurements 0, 1, 2, ... in
+that order, so a consumer that processes by (t, seq) reproduces the offline run exactly.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from uav_fusion.core.data.uav_class import uav_class_tracks
+from uav_fusion.core.estimators.kalman import PackedR
+from uav_fusion.core.estimators.profile import Profile, load_profile
+from uav_fusion.core.records import RADAR, RF, Flight, Measurement, RadarFrame, RadarTrack
+from uav_fusion.core.site import Site
+
+StreamItem = Measurement | list[Measurement]
+
+SOURCE_RANK = {RADAR: 0, RF: 1}
+
+
+def largest_track_id(frames: Iterable[RadarFrame]) -> int | None:
+    """Id of the radar track with the most reports (ties: the lowest id); None if no reports.
+
+    This is the paper's offline "largest continuous track": a track id is continuous by
+    construction of the radar's tracker, and "largest" counts reports.
+    """
+    counts: Counter[int] = Counter(trk.track_id for fr in frames for trk in fr.tracks)
+    if not counts:
+        return None
+    return min(counts, key=lambda k: (-counts[k], k))
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """What building the stream did: totals and the radar selection."""
+
+    radar_frames: int
+    radar_reports: int
+    radar_selected: int
+    not_selected: int
+    selected_track_id: int | None
+    rf_attempts: int
+    rf_fixes: int
+
+
+def _radar_measurement(trk: RadarTrack, seq: int) -> Measurement:
+    return Measurement(
+        t=trk.t,
+        source=RADAR,
+        z=np.array((trk.e, trk.n, trk.u), dtype=float),
+        track_id=trk.track_id,
+        uav_prob=trk.uav_prob,
+        range_m=trk.range_m,
+        seq=seq,
+    )
+
+
+def build_stream(
+    flight: Flight, profile: Profile, site: Site
+) -> tuple[list[StreamItem], StreamInfo]:
+    """The measurement stream of a flight plus a summary of what was selected."""
+    del site  # the stream does not depend on the site; the estimator applies the range gate
+    keyed: list[tuple[float, int, int]] = []
+    if profile.use_radar:
+        keyed.extend((fr.t, SOURCE_RANK[RADAR], i) for i, fr in enumerate(flight.radar))
+    rf_fixes = 0
+    if profile.use_rf:
+        for i, a in enumerate(flight.rf):
+            if a.ok and np.isfinite(a.e) and np.isfinite(a.n):
+                rf_fixes += 1
+                keyed.append((a.t, SOURCE_RANK[RF], i))
+    keyed.sort()
+    largest = profile.radar_selection == "largest_track"
+    sel = largest_track_id(flight.radar) if largest and profile.use_radar else None
+    out: list[StreamItem] = []
+    seq = 0
+    reports = selected = 0
+    for _, rank, i in keyed:
+        if rank == SOURCE_RANK[RADAR]:
+            item = flight.radar[i]
+            reports += len(item.tracks)
+            if largest:
+                for trk in item.tracks:
+                    if trk.track_id == sel:
+                        out.append(_radar_measurement(trk, seq))
+                        seq += 1
+                        selected += 1
+            elif item.tracks:
+                cands = []
+                for trk in item.tracks:
+                    cands.append(_radar_measurement(trk, seq))
+                    seq += 1
+                selected += len(cands)
+                out.append(cands)
+        else:
+            a = flight.rf[i]
+            out.append(Measurement(t=a.t, source=RF, z=np.array((a.e, a.n), float), seq=seq))
+            seq += 1
+    info = StreamInfo(
+        radar_frames=len(flight.radar) if profile.use_radar else 0,
+        radar_reports=reports,
+        radar_selected=selected,
+        not_selected=reports - selected,
+        selected_track_id=sel,
+        rf_attempts=len(flight.rf) if profile.use_rf else 0,
+        rf_fixes=rf_fixes,
+    )
+    return out, info
+
+
+def flight_measurements(flight: Flight, profile: Profile, site: Site) -> list[StreamItem]:
+    """Time-ordered stream: radar frames as candidate lists (online selection) or the
+    selected track's reports as single measurements (largest-track selection); RF fixes
+    with ``ok`` only. Deterministic ``seq`` numbers."""
+    return build_stream(flight, profile, site)[0]
+
+
+#: ``track_selection`` value meaning "the profile's own selection".
+PROFILE_SELECTION = "profile"
+
+
+def radar_profile(profile: str | Profile, track_selection: str = PROFILE_SELECTION) -> Profile:
+    """The profile (a name, a path or a loaded one) with ``track_selection`` applied
+    (``"profile"``: the profile's own selection)."""
+    prof = profile if isinstance(profile, Profile) else load_profile(profile)
+    if track_selection != PROFILE_SELECTION and track_selection != prof.radar_selection:
+        prof = prof.with_changes(radar_selection=track_selection)
+    return prof
+
+
+def selected_radar(flight: Flight, profile: Profile, site: Site) -> list[list[Measurement]]:
+    """The radar frames (lists of candidates, in order) the offline runner would feed."""
+    frames: list[list[Measurement]] = []
+    for item in flight_measurements(flight, profile, site):
+        group = list(item) if isinstance(item, list) else [item]
+        radar = [m for m in group if m.source == RADAR]
+        if radar:
+            frames.append(radar)
+    return frames
+
+
+def raw_radar_reports(flight: Flight, profile: Profile) -> list[RadarTrack]:
+    """The UAV reports of the raw radar row (the profile's per-track mean rule)."""
+    return uav_class_tracks(flight.radar, profile.raw_radar_min_mean_uav_prob)
+
+
+def report_covariance(profile: Profile, site: Site) -> Callable[[float, float, float], PackedR]:
+    """The ENU covariance (packed upper triangle xx, xy, xz, yy, yz, zz) that ``profile``'s
+    radar model gives a report at (e, n, u): the fixed R of the paper profile, the polar
+    model's R of a tracker profile. Published with every report on ``radar/tracks``."""
+    from uav_fusion.core.estimators.tracker import radar_model_from_profile
+
+    return radar_model_from_profile(profile, site).r_at

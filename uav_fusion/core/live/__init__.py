@@ -1,0 +1,1 @@
+"""The live input timeline: time order and stamp policy for streaming consumers."""

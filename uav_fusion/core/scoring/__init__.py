@@ -1,0 +1,1 @@
+"""Scoring against truth: Table II, fixed-rate errors, GOSPA, sensor calibration, reports."""

@@ -1,0 +1,331 @@
+"""Fixed-rate scoring: what the system publishes at every grid epoch, against truth.
+
+Table II (:mod:`uav_fusion.core.scoring.evaluation`) scores the estimates the filter
+happens to make, at the measurement times. A user sees the fixed-rate output instead
+(:mod:`uav_fusion.core.estimators.grid`): at every epoch ``k / frequency`` either a
+published track state or nothing. This module scores that output over the **airborne epochs**: grid epochs where the
+truth, linearly interpolated, is more than ``airborne_min_m`` (5 m) above the take-off point
+(epochs inside a truth gap longer than ``max_truth_gap_s`` are not scored).
+
+Per flight, and pooled over flights (:func:`pool`):
+
+* ``coverage_pct``: airborne epochs with a published track;
+* ``fresh_coverage_pct``: airborne epochs with a published track whose last accepted
+  measurement is at most ``fresh_age_s`` (1 s) old;
+* 3D error mean, p50, p95, max over the covered (published) airborne epochs;
+* ``gross_pct``: covered epochs whose error exceeds ``gross_error_m`` (100 m);
+* the same coverage and gross share over the **radar-observable** epochs: airborne epochs with
+  a radar report of the UAV within ``observable_window_s`` (2 s); the twin knows which reports
+  are the UAV's (``bench_labels.json``); without labels these figures are NaN;
+  ``observable_after_start_pct`` is that coverage counted from the flight's first airborne
+  epoch with a confirmed track on (the radar-observable epochs before it are the start-up:
+  the time the tracker takes to find the UAV, against the ones it loses later);
+* NEES ``e^T P^-1 e`` of the published position covariance (``P``'s position block) on the
+  covered epochs: ANEES (its mean; 3 for an honest covariance) and the share inside the
+  two-sided ``nees_probability`` (95 %) chi-square(3) bounds (95 % for an honest one);
+* ``ttf_s``: time from the first airborne epoch to the first airborne epoch with a confirmed
+  track (0 when one existed already; NaN when none ever did);
+* ``restarts``: confirmed tracks of the run after the first one (the published track was
+  replaced by a new one: an estimator reset);
+* what the gross errors are (per flight): ``gross_vertical_pct``, the share of gross epochs
+  whose vertical error exceeds the horizontal one, ``gross_age_p50_s``, the median age of
+  the last accepted measurement at them (a long coast on the CV prediction), and
+  ``gross_rf_pct``, the share of them whose last accepted measurement was an RF fix.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.stats import chi2
+
+from uav_fusion.core.estimators.grid import Grid
+from uav_fusion.core.records import RF, Flight
+from uav_fusion.core.scoring.metrics import interpolate_truth
+from uav_fusion.core.site import Site
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ScoreSettings:
+    airborne_min_m: float = 5.0  # truth above the take-off point
+    fresh_age_s: float = 1.0
+    gross_error_m: float = 100.0
+    observable_window_s: float = 2.0
+    max_truth_gap_s: float = 2.0
+    nees_probability: float = 0.95  # two-sided bounds of the per-epoch NEES
+
+    def nees_bounds(self, dof: int = 3) -> tuple[float, float]:
+        a = (1.0 - self.nees_probability) / 2.0
+        return float(chi2.ppf(a, dof)), float(chi2.ppf(1.0 - a, dof))
+
+
+@dataclass(frozen=True)
+class FlightTruth:
+    """Truth of one flight: times, ENU positions, height above the take-off point."""
+
+    t: FloatArray
+    enu: FloatArray
+    above_takeoff: FloatArray
+
+    @staticmethod
+    def from_flight(flight: Flight, site: Site) -> FlightTruth:
+        fixes = sorted(flight.truth, key=lambda f: f.t)
+        t = np.array([f.t for f in fixes], dtype=float)
+        enu = np.array([(f.e, f.n, f.u) for f in fixes], dtype=float).reshape(-1, 3)
+        above = np.array([f.h - site.takeoff_h for f in fixes], dtype=float)
+        if t.size:  # one sample per time
+            keep = np.concatenate(([True], np.diff(t) > 0))
+            t, enu, above = t[keep], enu[keep], above[keep]
+        return FlightTruth(t, enu, above)
+
+    @property
+    def span(self) -> tuple[float, float]:
+        if self.t.size == 0:
+            return (math.nan, math.nan)
+        return float(self.t[0]), float(self.t[-1])
+
+
+@dataclass(frozen=True)
+class GridSamples:
+    """One flight's per-epoch outcomes (kept so flights can be pooled exactly)."""
+
+    epochs: int  # airborne epochs
+    covered: int  # ... with a published track
+    fresh: int  # ... published and last accepted measurement <= fresh_age_s old
+    errors: FloatArray  # 3D error of each covered epoch
+    nees: FloatArray  # NEES of each covered epoch
+    vertical: FloatArray  # |vertical error| of each covered epoch
+    ages: FloatArray  # age of the last accepted measurement at each covered epoch
+    rf_last: npt.NDArray[np.bool_]  # ... that measurement was an RF fix
+    observable: int  # radar-observable epochs (-1: no labels)
+    observable_covered: int
+    observable_gross: int
+    ttf_s: float
+    restarts: int
+    observable_startup: int = 0  # radar-observable epochs before the first tracked one
+
+
+@dataclass(frozen=True)
+class GridScore:
+    """The figures of one flight or of a pool of flights (percentages in %)."""
+
+    flights: int
+    epochs: int
+    coverage_pct: float
+    fresh_coverage_pct: float
+    err_mean_m: float
+    err_p50_m: float
+    err_p95_m: float
+    err_max_m: float
+    gross_pct: float
+    observable_epochs: int
+    observable_coverage_pct: float
+    observable_gross_pct: float
+    anees: float
+    nees_in95_pct: float
+    ttf_s: float  # pooled: mean over the flights that had a confirmed track
+    no_track_flights: int  # flights without any confirmed track while airborne
+    restarts: int  # pooled: total
+    # what the gross errors are: the share of them whose vertical error exceeds the
+    # horizontal one, and the median age of the last accepted measurement at them
+    gross_vertical_pct: float
+    gross_age_p50_s: float
+    gross_rf_pct: float  # share of gross epochs whose last accepted measurement was RF
+    # radar-observable coverage from each flight's first tracked airborne epoch on
+    observable_after_start_pct: float = math.nan
+
+    def as_dict(self) -> dict[str, float | int]:
+        return asdict(self)
+
+
+def _pct(num: int, den: int) -> float:
+    return 100.0 * num / den if den > 0 else math.nan
+
+
+def nees(err: FloatArray, P_pos: FloatArray) -> FloatArray:
+    """``e^T P^-1 e`` per row: ``err`` (N, 3), ``P_pos`` (N, 3, 3)."""
+    if err.shape[0] == 0:
+        return np.zeros(0)
+    sol = np.linalg.solve(P_pos, err[:, :, None])[:, :, 0]
+    return np.asarray(np.einsum("ij,ij->i", err, sol), dtype=float)
+
+
+@dataclass(frozen=True)
+class EpochErrors:
+    """Per grid epoch: airborne?, covered (airborne and published)?, truth, 3D error, NEES
+    (error and NEES NaN where not covered)."""
+
+    airborne: npt.NDArray[np.bool_]
+    covered: npt.NDArray[np.bool_]
+    truth_enu: FloatArray
+    error_m: FloatArray
+    nees: FloatArray
+
+
+def epoch_errors(
+    grid: Grid, truth: FlightTruth, settings: ScoreSettings | None = None
+) -> EpochErrors:
+    """The grid's epochs against truth (see the module docstring for airborne and covered)."""
+    s = settings or ScoreSettings()
+    ref = interpolate_truth(truth.t, truth.enu, grid.t, max_gap_s=s.max_truth_gap_s)
+    above = np.full(grid.t.size, math.nan)
+    if truth.t.size >= 2:
+        above = interpolate_truth(
+            truth.t,
+            np.column_stack([truth.above_takeoff] * 3),
+            grid.t,
+            max_gap_s=s.max_truth_gap_s,
+        )[:, 0]
+    with np.errstate(invalid="ignore"):
+        airborne = np.isfinite(ref[:, 0]) & (above > s.airborne_min_m)
+    cov = airborne & grid.published
+    d = grid.x[cov, :3] - ref[cov]
+    err = np.full(grid.t.size, math.nan)
+    err[cov] = np.sqrt(np.sum(d * d, axis=1))
+    ne = np.full(grid.t.size, math.nan)
+    ne[cov] = nees(d, grid.P[cov][:, :3, :3])
+    return EpochErrors(airborne, cov, ref, err, ne)
+
+
+def observable_epochs(
+    t: FloatArray, airborne: npt.NDArray[np.bool_], uav_report_t: FloatArray, window_s: float
+) -> npt.NDArray[np.bool_]:
+    """The radar-observable epochs: airborne, with a radar report of the UAV (times
+    ``uav_report_t``, any order) within ``window_s`` of the epoch."""
+    rt = np.sort(np.asarray(uav_report_t, dtype=float))
+    lo = np.searchsorted(rt, t - window_s, side="left")
+    hi = np.searchsorted(rt, t + window_s, side="right")
+    return np.asarray(airborne & (hi > lo), dtype=bool)
+
+
+def score_grid(
+    grid: Grid,
+    truth: FlightTruth,
+    uav_report_t: FloatArray | None = None,
+    settings: ScoreSettings | None = None,
+) -> GridSamples:
+    """Score one flight's fixed-rate output (see the module docstring)."""
+    s = settings or ScoreSettings()
+    ee = epoch_errors(grid, truth, s)
+    airborne, cov = ee.airborne, ee.covered
+    fresh = cov & (grid.age_s <= s.fresh_age_s)
+    err = ee.error_m[cov]
+    ne = ee.nees[cov]
+    vertical = np.abs(grid.x[cov, 2] - ee.truth_enu[cov, 2])
+    gross = err > s.gross_error_m
+
+    air_idx = np.flatnonzero(airborne)
+    tracked = np.flatnonzero(airborne & grid.has_track)
+    n_start = 0
+    if uav_report_t is None:
+        n_obs, n_obs_cov, n_obs_gross = -1, 0, 0
+    else:
+        obs = observable_epochs(grid.t, airborne, uav_report_t, s.observable_window_s)
+        n_obs = int(np.count_nonzero(obs))
+        n_obs_cov = int(np.count_nonzero(obs & cov))
+        gross_all = np.zeros(grid.t.size, dtype=bool)
+        gross_all[np.flatnonzero(cov)] = gross
+        n_obs_gross = int(np.count_nonzero(obs & gross_all))
+        first = int(tracked[0]) if tracked.size else grid.t.size
+        n_start = int(np.count_nonzero(obs[:first]))
+
+    ttf = math.nan
+    if air_idx.size:
+        t_air = grid.t[air_idx[0]]
+        if tracked.size:
+            ttf = float(grid.t[tracked[0]] - t_air)
+    return GridSamples(
+        epochs=int(air_idx.size),
+        covered=int(np.count_nonzero(cov)),
+        fresh=int(np.count_nonzero(fresh)),
+        errors=np.asarray(err, dtype=float),
+        nees=ne,
+        vertical=np.asarray(vertical, dtype=float),
+        ages=np.asarray(grid.age_s[cov], dtype=float),
+        rf_last=np.asarray(grid.last_source[cov] == RF, dtype=bool),
+        observable=n_obs,
+        observable_covered=n_obs_cov,
+        observable_gross=n_obs_gross,
+        ttf_s=ttf,
+        restarts=grid.restarts,
+        observable_startup=n_start,
+    )
+
+
+def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) -> GridScore:
+    """The figures over one or several flights (epochs pooled; ttf averaged; restarts summed)."""
+    s = settings or ScoreSettings()
+    epochs = sum(x.epochs for x in samples)
+    covered = sum(x.covered for x in samples)
+    fresh = sum(x.fresh for x in samples)
+    err = np.concatenate([x.errors for x in samples]) if samples else np.zeros(0)
+    ne = np.concatenate([x.nees for x in samples]) if samples else np.zeros(0)
+    labelled = [x for x in samples if x.observable >= 0]
+    n_obs = sum(x.observable for x in labelled)
+    n_obs_cov = sum(x.observable_covered for x in labelled)
+    n_obs_gross = sum(x.observable_gross for x in labelled)
+    n_obs_start = sum(x.observable_startup for x in labelled)
+    vert = np.concatenate([x.vertical for x in samples]) if samples else np.zeros(0)
+    ages = np.concatenate([x.ages for x in samples]) if samples else np.zeros(0)
+    rf_last = np.concatenate([x.rf_last for x in samples]) if samples else np.zeros(0, bool)
+    gross = err > s.gross_error_m
+    n_gross = int(np.count_nonzero(gross))
+    horiz2 = err[gross] ** 2 - vert[gross] ** 2  # horizontal error squared
+    lo, hi = s.nees_bounds(3)
+    ttfs = [x.ttf_s for x in samples if math.isfinite(x.ttf_s)]
+    nan = math.nan
+    return GridScore(
+        flights=len(samples),
+        epochs=epochs,
+        coverage_pct=_pct(covered, epochs),
+        fresh_coverage_pct=_pct(fresh, epochs),
+        err_mean_m=float(err.mean()) if err.size else nan,
+        err_p50_m=float(np.percentile(err, 50)) if err.size else nan,
+        err_p95_m=float(np.percentile(err, 95)) if err.size else nan,
+        err_max_m=float(err.max()) if err.size else nan,
+        gross_pct=_pct(n_gross, int(err.size)),
+        observable_epochs=n_obs if labelled else -1,
+        observable_coverage_pct=_pct(n_obs_cov, n_obs) if labelled else nan,
+        observable_gross_pct=_pct(n_obs_gross, n_obs_cov) if labelled else nan,
+        anees=float(ne.mean()) if ne.size else nan,
+        nees_in95_pct=_pct(int(np.count_nonzero((ne >= lo) & (ne <= hi))), int(ne.size)),
+        ttf_s=float(np.mean(ttfs)) if ttfs else nan,
+        no_track_flights=sum(1 for x in samples if x.epochs > 0 and not math.isfinite(x.ttf_s)),
+        restarts=sum(x.restarts for x in samples),
+        gross_vertical_pct=_pct(int(np.count_nonzero(vert[gross] ** 2 > horiz2)), n_gross),
+        gross_age_p50_s=float(np.median(ages[gross])) if n_gross else nan,
+        gross_rf_pct=_pct(int(np.count_nonzero(rf_last[gross])), n_gross),
+        observable_after_start_pct=(
+            _pct(n_obs_cov, n_obs - n_obs_start) if labelled else nan
+        ),
+    )
+
+
+# columns of the printed table: (GridScore field, header, format)
+TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("coverage_pct", "cov %", ".1f"),
+    ("fresh_coverage_pct", "fresh %", ".1f"),
+    ("err_mean_m", "mean m", ".1f"),
+    ("err_p50_m", "p50 m", ".1f"),
+    ("err_p95_m", "p95 m", ".1f"),
+    ("err_max_m", "max m", ".0f"),
+    ("gross_pct", "gross %", ".1f"),
+    ("observable_coverage_pct", "obs cov %", ".1f"),
+    ("observable_gross_pct", "obs gross %", ".1f"),
+    ("anees", "ANEES", ".1f"),
+    ("nees_in95_pct", "NEES in 95 % %", ".1f"),
+    ("ttf_s", "first track s", ".1f"),
+    ("restarts", "restarts", "d"),
+)
+
+
+def format_value(v: float | int, fmt: str) -> str:
+    if isinstance(v, float) and not math.isfinite(v):
+        return "-"
+    return format(v, fmt)
