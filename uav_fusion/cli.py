@@ -14,7 +14,7 @@ COMMANDS: dict[str, str] = {
     "generate": "generate",
     "calibrate": "calibrate",
     "estimate-r": "estimate_r",
-    "run": "run_offline",
+    "run": "run",
     "evaluate": "evaluate",
     "convert": "convert",
     "demo": "demo",
