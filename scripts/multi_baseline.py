@@ -5,7 +5,7 @@
 
 For every flight, the multi-UAV tracker (:func:`uav_fusion.core.estimators.multi.run_multi`)
 and the Stone Soup baseline (:func:`run_stonesoup`) run over the same time-ordered radar
-frames and RF fixes (``tracker_stream``) and give their confirmed tracks on the same grid
+frames and RF fixes (``frames_input``) and give their confirmed tracks on the same grid
 (the span of the flight's truth). Printed per flight: the wall time of each run
 (``time.perf_counter`` around the run only; inputs built beforehand), the ratio Stone Soup /
 ours, the number of distinct confirmed track ids on the grid, and per vehicle the share of
@@ -114,7 +114,7 @@ from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import Profile, load_profile
 from uav_fusion.core.estimators.components import packed_to_array
 from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, TrackOutput, run_multi
-from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import (
     alignment_from_profile,
     radar_model_from_profile,
@@ -445,7 +445,7 @@ def run_stonesoup(
 ) -> list[GridEpoch]:
     """The Stone Soup baseline over a flight's radar frames and RF fixes: its confirmed
     tracks at every grid time ``t_start + k / grid_hz`` up to ``t_end`` (as ``run_multi``)."""
-    stream = list(tracker_stream(flight, profile))
+    stream = list(frames_input(flight, profile))
     return run_baseline_stream(build_baseline(profile, site), stream, grid_hz, t_start, t_end)
 
 
@@ -546,7 +546,7 @@ def compare(
     excuse_grounded: bool = True,
 ) -> dict[str, Any]:
     flight = load_flight(folder, site)
-    stream = list(tracker_stream(flight, profile))
+    stream = list(frames_input(flight, profile))
     t0, t1 = truth_span(flight, stream)
     mt = MultiTracker(profile, site)
     c = time.perf_counter()

@@ -37,8 +37,8 @@ from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_f
 from uav_fusion.core.bench.definition import BenchDefinition, load_definition
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, run_multi
-from uav_fusion.core.estimators.offline import tracker_stream
 from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight, RadarFrame
 from uav_fusion.core.scoring.gospa import MultiScoreSettings, UavTruth, score_flight
 from uav_fusion.core.site import Site, load_site
@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         vehicle_of = {radar_model.uav_object_id(i): v for i, v in enumerate(truths)}
         t0 = min(float(x.t[0]) for x in truths.values())
         t1 = max(float(x.t[-1]) for x in truths.values())
-        stream = list(tracker_stream(flight, profile))
+        stream = list(frames_input(flight, profile))
         tracker = MultiTracker(profile, site)
         epochs: list[GridEpoch] = run_multi(tracker, stream, hz, t0, t1)
         # what each confirmed track was born on (a second pass, frame by frame)

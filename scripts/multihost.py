@@ -481,27 +481,29 @@ def _recording_fusion_node() -> type[Any]:
             self.step_log: list[tuple[float, str, bool]] = []  # (time, source, updated)
             super().__init__(**kwargs)
 
-        def _record(self, source: str, msg: Any, handle: Callable[[Any], None]) -> None:
-            clock = self._sim_now()
-            mark = self.buffer.watermark if clock is None else max(clock, self.buffer.watermark)
+            publish = self.output.publish
+
+            def logged(out: Any) -> None:
+                self.step_log.extend(
+                    (float(s.t), str(s.source), bool(s.updated)) for s in out.steps
+                )
+                publish(out)
+
+            self.output.publish = logged  # type: ignore[method-assign]
+
+        # the node drains both input queues per callback and handles each message in _one:
+        # record there, so every message is seen once, in order
+        def _one(self, source: str, msg: Any) -> Any:
+            clock = self._now()[1]
+            wm = self.pipeline.buffer.watermark
+            mark = wm if clock is None else max(clock, wm)
             late = self.dropped[f"late_{source}"]
-            handle(msg)
+            out = super()._one(source, msg)
             failed = source == "rf" and cv.is_failed_rf(msg)
             self.arrivals[source].append((cv.time_from_stamp(msg.header.stamp), mark,
                                           time.monotonic(),
                                           self.dropped[f"late_{source}"] > late, failed))
-
-        def _publish_step(self, step: Any, by_seq: dict[int, Any]) -> None:
-            self.step_log.append((float(step.t), str(step.source), bool(step.updated)))
-            super()._publish_step(step, by_seq)
-
-        # the node drains both input queues per callback and handles each message in
-        # _one_rf / _one_radar: record there, so every message is seen once, in order
-        def _one_rf(self, msg: Any) -> None:
-            self._record("rf", msg, super()._one_rf)
-
-        def _one_radar(self, msg: Any) -> None:
-            self._record("radar", msg, super()._one_radar)
+            return out
 
     return RecordingFusionNode
 
@@ -572,7 +574,7 @@ def fusion_host(flight: str, rate: float, window: float, out: Path, report: Path
             r = evaluator.received
             return (r["fusion/odom/updated"] + r["fusion/odom/coasted"] >= fusion.steps_published
                     and r["fusion/accepted/radar"] + r["fusion/accepted/rf"]
-                    >= fusion.accepted_published)
+                    >= fusion.output.accepted_published)
 
         spin_until(evaluator_has_all, 60.0, "the evaluator to receive every fused step")
         files = evaluator.write_report()

@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from uav_fusion.core.bench.definition import load_definition
-from uav_fusion.core.estimators.offline import feed_tracker, tracker_stream
+from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import RadarFrame
 from uav_fusion.core.site import load_site
@@ -65,8 +66,8 @@ def main(argv: list[str] | None = None) -> int:
             secs: Counter[str] = Counter()
             lock = 0.0
             prev: tuple[float, str, bool] | None = None  # (t, kind, more than 100 m off)
-            for item in tracker_stream(flight, profile):
-                feed_tracker(tracker, item)
+            for item in frames_input(flight, profile):
+                feed(tracker, item)
                 if not isinstance(item, RadarFrame):
                     continue
                 t = item.t

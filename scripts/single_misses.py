@@ -48,8 +48,8 @@ from uav_fusion.core.bench.cache import read_labels
 from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.estimators.grid import grid_from_steps
 from uav_fusion.core.estimators.offline import run_flight
-from uav_fusion.core.estimators.paper import UPDATED
 from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.estimators.steps import UPDATED
 from uav_fusion.core.estimators.tracker import TrackerStep
 from uav_fusion.core.records import RADAR
 from uav_fusion.core.scoring.fixed_rate import (

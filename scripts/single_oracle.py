@@ -46,8 +46,8 @@ from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.bench.single import ScoreTask, score_task
 from uav_fusion.core.estimators.grid import grid_from_published
 from uav_fusion.core.estimators.multi import MultiSettings, run_multi
-from uav_fusion.core.estimators.offline import tracker_stream
 from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import RadarFrame, RfAttempt
 from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
@@ -148,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             profile, site, kinds, objects, emitters, list(flight.vehicles), single_rule
         )
         t0, t1 = truth.span
-        stream = list(tracker_stream(flight, profile))
+        stream = list(frames_input(flight, profile))
         epochs = run_multi(oracle, stream, definition.grid_hz, t0, t1)
         pub = [(ep.t, ep.tracks[0]) for ep in epochs if ep.tracks]
         grid = grid_from_published(

@@ -30,7 +30,7 @@ from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight, TruthFix
 from uav_fusion.core.scoring.gospa import (
     EpochTracks,
@@ -181,7 +181,7 @@ def test_the_task_scores_the_flight_as_run_multi_and_score_flight_do(
     truths = {v: UavTruth(*flight.truth_arrays(v)) for v in flight.vehicles}
     t0 = min(float(x.t[0]) for x in truths.values())
     t1 = max(float(x.t[-1]) for x in truths.values())
-    epochs = run_multi(MultiTracker(profile, site), list(tracker_stream(flight, profile)), 1.0,
+    epochs = run_multi(MultiTracker(profile, site), list(frames_input(flight, profile)), 1.0,
                        t0, t1)  # fmt: skip
     ref = score_flight(truths, epochs, MultiScoreSettings())
     assert np.array_equal(res.samples.distance, ref.distance)

@@ -20,7 +20,6 @@ from uav_fusion.core.estimators import (
     build_stream,
     cv_process_noise,
     cv_transition,
-    estimate_r,
     flight_measurements,
     kf_predict,
     kf_update_joseph,
@@ -33,7 +32,7 @@ from uav_fusion.core.estimators import (
 )
 from uav_fusion.core.estimators.synthetic import simulate_stream, stream_to_flight
 from uav_fusion.core.records import RADAR, RF, Measurement, RadarFrame, RadarTrack
-from uav_fusion.core.scoring.noise import sample_cov, trimmed_cov
+from uav_fusion.core.scoring.noise import estimate_r, sample_cov, trimmed_cov
 from uav_fusion.core.site import Site, load_site
 
 R3 = np.diag([100.0, 100.0, 150.0])

@@ -199,7 +199,7 @@ def test_bad_messages_are_dropped_by_reason(ctx: Context) -> None:
         "rf_nan": 1,
     }
     assert h.flush().success
-    assert h.odom == [] and h.fusion.buffer.pending == 0
+    assert h.odom == [] and h.fusion.pipeline.buffer.pending == 0
     h.destroy()
 
 
@@ -217,7 +217,7 @@ def test_frame_candidates_with_one_stamp_are_processed_as_one_frame(ctx: Context
     # the first report starts the track (an update, not an accepted measurement)
     h.spin_until(lambda: len(h.odom) == 2 and len(h.updated) == 2 and len(h.acc_radar) == 1)
     assert h.acc_radar[0].pose.pose.position.x == 301.0
-    assert h.fusion.statuses["discarded"] == 1
+    assert h.fusion.output.statuses["discarded"] == 1
     h.destroy()
 
 
@@ -226,9 +226,9 @@ def test_idle_timer_flushes_the_buffer(ctx: Context) -> None:
     m = Measurement(1759866140.0, RADAR, np.array([300.0, 0.0, 50.0]), R=np.eye(3))
     h.pub_radar.publish(cv.radar_measurement_to_msg(m, FRAME))
     h.spin_until(lambda: h.fusion.received[RADAR] == 1)
-    assert h.fusion.buffer.pending == 1  # the RF stream has not moved past it yet
+    assert h.fusion.pipeline.buffer.pending == 1  # the RF stream has not moved past it yet
     h.spin_until(lambda: len(h.odom) == 1, limit_s=10.0)
-    assert h.fusion.buffer.pending == 0
+    assert h.fusion.pipeline.buffer.pending == 0
     h.destroy()
 
 

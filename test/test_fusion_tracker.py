@@ -23,7 +23,8 @@ from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.grid import StepGrid
 from uav_fusion.core.estimators.multi import MultiGrid, MultiTracker
-from uav_fusion.core.estimators.offline import run_tracker, smooth_steps, tracker_stream
+from uav_fusion.core.estimators.offline import run_tracker, smooth_steps
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import RadarFrame, RadarTrack
 from uav_fusion.core.site import load_site
@@ -61,7 +62,7 @@ class Harness:
         self.spin_until(
             lambda: self.pub_radar.get_subscription_count() > 0
             and self.pub_rf.get_subscription_count() > 0
-            and self.fusion.pub_odom.get_subscription_count() > 0
+            and self.fusion.output.pub_odom.get_subscription_count() > 0
         )
 
     def spin_until(self, cond: Callable[[], bool], limit_s: float = 120.0) -> None:
@@ -93,7 +94,7 @@ def flight_data() -> tuple[list[Any], list[Any], list[Any]]:
     t_end = flight.truth[0].t + SPAN_S
     frames = [fr for fr in flight.radar if fr.t < t_end]
     attempts = [a for a in flight.rf if a.t < t_end]
-    stream = [x for x in tracker_stream(flight, load_profile("tracker")) if x.t < t_end]
+    stream = [x for x in frames_input(flight, load_profile("tracker")) if x.t < t_end]
     return frames, attempts, stream
 
 
@@ -165,8 +166,8 @@ def test_malformed_points_are_dropped_and_counted_the_rest_fused(
     h.fusion.flush()
     assert h.fusion.dropped["radar_point_nan"] == 1
     assert h.fusion.dropped["radar_point_out_of_range"] == 1
-    assert h.fusion.received_reports == len(good.tracks) + 2
-    n = sum(h.fusion.statuses.values())
+    assert h.fusion.input.received_reports == len(good.tracks) + 2
+    n = sum(h.fusion.output.statuses.values())
     assert n == len(good.tracks)  # one step per good report, none for the bad points
     broken = cv.radar_frame_to_cloud_msg(good, FRAME)
     broken.data = bytes(broken.data)[:-3]
@@ -184,9 +185,9 @@ def test_output_is_predicted_on_when_the_inputs_stall(
     h.feed(_order(frames, attempts, 0.0, 0))
     h.spin_until(lambda: h.got() == len(frames) + len(attempts))
     fusion = h.fusion
-    h.spin_until(lambda: not fusion.timeline.pending)
-    last_t = fusion._processed_t
-    tracker = fusion.tracker
+    h.spin_until(lambda: not fusion.pipeline.pending)
+    last_t = fusion.pipeline.processed_t
+    tracker = fusion.estimator
     assert tracker is not None and tracker.best_track() is not None
     # with the inputs silent the epochs beyond the last measurement are published, up to the
     # track's maximum coast (the wall clock is far ahead of these 2025 stamps)
@@ -219,7 +220,7 @@ def test_live_fixed_lag_smoothing_equals_the_offline_one(
     h = Harness(ctx, profile="tracker_smoothed", idle_flush_s=0.0, stall_timeout_s=0.0)
     got: list[Odometry] = []
     h.io.create_subscription(Odometry, "fusion/odom/smoothed", got.append, stream_qos(10000))
-    h.spin_until(lambda: h.fusion.pub_smoothed.get_subscription_count() > 0)
+    h.spin_until(lambda: h.fusion.output.pub_smoothed.get_subscription_count() > 0)
     h.feed(_order(frames, attempts, 1.0, 3))
     h.spin_until(lambda: h.got() == len(frames) + len(attempts))
     h.fusion.flush()  # the end of the stream ends the last smoothing window
@@ -251,10 +252,10 @@ def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
             mt.process_rf(item)
     rows = [(ep.t, f"track_{o.track_id}", o.x) for ep in expected for o in ep.tracks]
     assert len(rows) > 1000
-    h = Harness(ctx, multi_target=True, idle_flush_s=0.0, stall_timeout_s=0.0)
+    h = Harness(ctx, estimator="multi", idle_flush_s=0.0, stall_timeout_s=0.0)
     got: list[Odometry] = []
     h.io.create_subscription(Odometry, "fusion/tracks", got.append, stream_qos(20000))
-    h.spin_until(lambda: h.fusion.pub_tracks.get_subscription_count() > 0)
+    h.spin_until(lambda: h.fusion.output.pub_tracks.get_subscription_count() > 0)
     h.feed(_order(frames, attempts, 0.0, 5))
     h.spin_until(lambda: h.got() == len(frames) + len(attempts))
     h.fusion.flush()
@@ -263,7 +264,7 @@ def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
             for m in got]  # fmt: skip
     assert [(t, c) for t, c, _ in live] == [(t, c) for t, c, _ in rows]
     assert max(float(np.max(np.abs(a[2] - b[2]))) for a, b in zip(live, rows, strict=True)) < 1e-9
-    markers = h.fusion.markers_message().markers
+    markers = h.fusion.output.markers_message().markers
     assert {m.ns for m in markers} >= {"tracks", "tracks_covariance", "tracks_label"}
     diag = h.fusion.diagnostics()
     assert int(diag["tracks_published"]) == len(rows)

@@ -77,10 +77,10 @@ def test_graph_track_and_table_equal_the_offline_run(
         for g, s in zip(got, steps, strict=True):
             assert np.allclose(g.P[:3, :3], s.P[:3, :3], rtol=0, atol=1e-9)
         assert not graph.fusion.dropped
-        assert graph.fusion.statuses["rf_failed_attempt"] == sum(not a.ok for a in flight.rf)
+        assert graph.fusion.pipeline.empty["rf_failed_attempt"] == sum(not a.ok for a in flight.rf)
         # RF really arrived late in sensor time, and was reordered
         if rf_delay:
-            assert graph.fusion.buffer.max_depth > 1
+            assert graph.fusion.pipeline.buffer.max_depth > 1
 
         # the evaluator's table equals the offline evaluation of the same data
         live = graph.evaluator.evaluate()

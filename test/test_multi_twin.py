@@ -12,7 +12,7 @@ from uav_fusion.core.bench.cache import uav_report_times
 from uav_fusion.core.bench.multi import crossings
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, run_multi
-from uav_fusion.core.estimators.offline import tracker_stream
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight
 from uav_fusion.core.scoring.gospa import FlightSamples, UavTruth, score_flight
 from uav_fusion.core.site import Site, load_site
@@ -44,7 +44,7 @@ def _run(site: Site, plan: str, seed: int) -> Run:
     truths = {v: UavTruth(*flight.truth_arrays(v)) for v in flight.vehicles}
     t0 = min(float(x.t[0]) for x in truths.values())
     t1 = max(float(x.t[-1]) for x in truths.values())
-    epochs = run_multi(MultiTracker(profile, site), list(tracker_stream(flight, profile)), 1.0,
+    epochs = run_multi(MultiTracker(profile, site), list(frames_input(flight, profile)), 1.0,
                        t0, t1)  # fmt: skip
     return Run(twin, flight, epochs, score_flight(truths, epochs), t0)
 

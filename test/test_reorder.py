@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from uav_fusion.core.live.reorder import Batch, ReorderBuffer
+from uav_fusion.core.live.pipeline import Batch, ReorderBuffer
 
 # (source, t, label): radar frames at 0.25 s (two candidates at t = 1.0), RF at ~3.9 s
 STREAMS = {

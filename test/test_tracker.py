@@ -15,9 +15,10 @@ import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import Profile, load_profile, run_flight
+from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.components import FixedRadarR, RadarAlignment
 from uav_fusion.core.estimators.objects import ObjectTable, ScoreConfig
-from uav_fusion.core.estimators.offline import feed_tracker, run_tracker
+from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import Site, load_site
@@ -494,7 +495,7 @@ def test_a_hover_the_radar_cannot_see_stops_the_coast_drifting(site: Site) -> No
             # as the offline runner and the node feed it: frames without a report are skipped
             # (a reflector elsewhere keeps the radar's frames coming through the hover)
             if not isinstance(item, RadarFrame) or item.tracks:
-                feed_tracker(tracker, item)
+                feed(tracker, item)
         assert tracker.confirmed and tracker.t == t_end
         x, _ = tracker.predict_to(t_end)
         return float(np.linalg.norm(np.asarray(x[:3]) - sc.uav(t_end))), tracker

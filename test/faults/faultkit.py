@@ -123,7 +123,7 @@ class FusionHarness(Spinner):
         """Flush and wait until every published step has come back."""
         self.flush()
         self.spin_until(lambda: len(self.odom) == self.fusion.steps_published)
-        self.spin_until(lambda: len(self.acc) == self.fusion.accepted_published)
+        self.spin_until(lambda: len(self.acc) == self.fusion.output.accepted_published)
 
     def diagnostics(self) -> dict[str, str]:
         return self.fusion.diagnostics()

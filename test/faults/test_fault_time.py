@@ -43,8 +43,8 @@ def test_clock_jump_back_resets_the_filter_and_says_so(
     h.spin_until(lambda: h.fusion.steps_published >= 30)
     pass1 = h.fusion.steps_published
     h.clock(T0)  # loop: back to the start
-    h.spin_until(lambda: h.fusion.clock_jumps_back == 1)
-    assert h.fusion.buffer.pending == 0
+    h.spin_until(lambda: h.fusion.pipeline.clock_jumps_back == 1)
+    assert h.fusion.pipeline.buffer.pending == 0
     assert h.fusion.steps_published == 40  # the held end of pass 1 was processed, not lost
     assert pass1 <= 40
     second = radar_track(T0, T0 + 10.0)
@@ -103,7 +103,7 @@ def test_clock_jump_forward_releases_the_buffer_without_reset(ctx: Context) -> N
     h = FusionHarness(ctx, use_sim_time=True, reorder_window_s=2.0)
     h.clock(T0)
     h.send(*radar_track(T0, T0 + 2.0))
-    assert h.fusion.buffer.pending > 0  # waiting for the RF stream
+    assert h.fusion.pipeline.buffer.pending > 0  # waiting for the RF stream
     h.clock(T0 + 3600.0)  # the player skipped an hour
     h.send(rf_msg(T0 + 3600.5, 300.0, 0.0))
     h.spin_until(lambda: h.fusion.steps_published >= 8)
@@ -142,7 +142,7 @@ def test_sim_time_zero_before_the_first_clock_message(ctx: Context) -> None:
     assert h.fusion.get_clock().now().nanoseconds == 0
     h.send(*radar_track(T0, T0 + 3.0))
     h.spin_until(lambda: h.fusion.steps_published == 12, limit_s=20.0)
-    assert h.fusion.buffer.pending == 0 and not h.fusion.dropped
+    assert h.fusion.pipeline.buffer.pending == 0 and not h.fusion.dropped
     assert h.fusion.diagnostics()["used_radar"] == "12"
     h.destroy()
 

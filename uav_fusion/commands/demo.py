@@ -213,7 +213,7 @@ def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: s
             return None
         live = graph.evaluator.evaluate()
         dropped = dict(graph.fusion.dropped)
-        grid = graph.fusion.grid_published
+        grid = graph.fusion.output.grid_published
         flight_s = graph.driver.t_end - graph.driver.t_start
     finally:
         if graph is not None:
@@ -287,7 +287,7 @@ def _run_multi(args: argparse.Namespace, out: Path) -> int:
     ov = _overrides(args, flight_dir, out)
     ov["radar_replay"]["profile"] = profile_name
     ov["fusion_node"].update(
-        {"profile": profile_name, "multi_target": True, "stall_timeout_s": 0.0}
+        {"profile": profile_name, "estimator": "multi", "stall_timeout_s": 0.0}
     )
     hz = 10.0
     ov["fusion_node"]["frequency"] = hz
@@ -321,7 +321,7 @@ def _run_multi(args: argparse.Namespace, out: Path) -> int:
         live = graph.evaluator.multi_score()
         with graph.evaluator._lock:
             received = sorted(graph.evaluator._tracks, key=lambda r: (r[0], r[1]))
-        published = graph.fusion.tracks_published
+        published = graph.fusion.output.tracks_published
         flight_s = graph.driver.t_end - graph.driver.t_start
     finally:
         if graph is not None:
@@ -372,9 +372,7 @@ def _compare_multi_offline(
 
     import numpy as np
 
-    from uav_fusion.core.estimators.multi import MultiGrid, MultiTracker
-    from uav_fusion.core.estimators.offline import tracker_stream
-    from uav_fusion.core.records import RadarFrame
+    from uav_fusion.core.estimators.base import feed, make_estimator
     from uav_fusion.core.scoring.gospa import (
         MultiScoreSettings,
         UavTruth,
@@ -384,16 +382,11 @@ def _compare_multi_offline(
     )
 
     t_start = time.perf_counter()
-    mt = MultiTracker(profile, site)
-    grid = MultiGrid(mt, hz)
+    est = make_estimator(profile, site, hz, kind="multi")
     rows: list[tuple[float, int, Any]] = []
-    for item in tracker_stream(flight, profile):
-        for ep in grid.before(item.t):
+    for item in est.flight_input(flight):
+        for ep in feed(est, item).tracks:
             rows.extend((ep.t, o.track_id, o.x) for o in ep.tracks)
-        if isinstance(item, RadarFrame):
-            mt.process_radar_frame(item)
-        else:
-            mt.process_rf(item)
     rows.sort(key=lambda r: (r[0], r[1]))
     same = [(t, i) for t, i, _ in rows] == [(t, i) for t, i, _ in received]
     worst = max(
@@ -556,13 +549,13 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
             )
         )
         fusion.flush()
-        fusion.publish_views(force=True)  # the final path and markers
+        fusion.output.publish_views(force=True)  # the final path and markers
         to_evaluator = ("/radar/raw", "/rf/fix", "/truth/fix")
         expected = sum(played.get(t, 0) for t in to_evaluator)
         ok = ok and spin_until(
             lambda: (
                 sum(evaluator.received.values())
-                >= expected + fusion.steps_published + fusion.accepted_published
+                >= expected + fusion.output.steps_published + fusion.output.accepted_published
             )
         )
         if recorder is not None:
@@ -572,9 +565,9 @@ def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
                     recorder.received["/fusion/odom"] >= fusion.steps_published
                     and recorder.received["/fusion/accepted/radar"]
                     + recorder.received["/fusion/accepted/rf"]
-                    >= fusion.accepted_published
-                    and recorder.received["/fusion/path"] >= fusion.paths_published
-                    and recorder.received["/fusion/markers"] >= fusion.markers_published
+                    >= fusion.output.accepted_published
+                    and recorder.received["/fusion/path"] >= fusion.output.paths_published
+                    and recorder.received["/fusion/markers"] >= fusion.output.markers_published
                 )
             )
             written = recorder.close()

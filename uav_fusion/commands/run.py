@@ -8,8 +8,8 @@ import time
 from pathlib import Path
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.paper import Step
 from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
@@ -151,7 +151,7 @@ def write_targets(flight: Flight, profile: Profile, site: Site, path: str, hz: f
     import csv
 
     from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-    from uav_fusion.core.estimators.offline import tracker_stream
+    from uav_fusion.core.estimators.selection import frames_input
     from uav_fusion.core.scoring.gospa import UavTruth, pool, score_flight
 
     if not profile.uses_tracker:
@@ -161,7 +161,7 @@ def write_targets(flight: Flight, profile: Profile, site: Site, path: str, hz: f
         )
     if not (math.isfinite(hz) and hz > 0):
         raise ConfigError(f"--targets-hz must be > 0, got {hz}")
-    stream = list(tracker_stream(flight, profile))
+    stream = list(frames_input(flight, profile))
     spans = [flight.truth_arrays(v)[0] for v in flight.vehicles]
     ts = [float(x) for t in spans for x in (t[:1].tolist() + t[-1:].tolist())]
     if not ts:

@@ -56,6 +56,9 @@ class RadarTrack:
     radial_velocity: float | None = None
     num_inliers: int | None = None
     line: int = 0
+    # the report's ENU covariance as sent with it (upper triangle xx, xy, xz, yy, yz, zz;
+    # ``radar/pose`` carries one), or None
+    cov: tuple[float, float, float, float, float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,22 +9,22 @@ Subscribes (topic names are parameters; defaults from docs/graph.md):
 - ``fusion/odom/updated``, ``fusion/odom/coasted`` (nav_msgs/Odometry): the filter's steps;
 - with ``grid_topic`` set (e.g. ``fusion/odom`` of a tracker profile): the fixed-rate output,
   scored on its grid (``grid_hz``) like the accuracy benchmark (:mod:`uav_fusion.core.
-  gridscore`: coverage of the airborne epochs, error mean / p95 / max, gross share, ANEES);
+  scoring.fixed_rate`: coverage of the airborne epochs, error mean / p95 / max, gross share, ANEES);
   the figures go into the report's header and metrics.json. A message off the grid is
   counted (``off_grid``) and not scored;
-- with ``tracks_topic`` set (``fusion/tracks`` of a fusion node with ``multi_target``): every
-  confirmed track at every epoch of its grid (``tracks_hz``; Odometry, ``child_frame_id``
-  ``track_<id>``), scored as a set against every UAV's truth on ``truth/<vehicle>/fix``
-  (the vehicles listed in ``vehicles``, or, with ``vehicles`` empty, every such topic the
-  node discovers) like the multi-UAV benchmark (:mod:`uav_fusion.core.scoring.gospa`: GOSPA
-  with p 2, c 100 m, alpha 2; per-UAV coverage, errors, ID switches; false-track seconds).
-  The epochs from the first truth sample to the last one (the report), or to the last track
-  message (the periodic log and /diagnostics), are scored; an epoch without a message has no
-  track.
+- with ``tracks_topic`` set (``fusion/tracks`` of a fusion node running the multi-UAV
+  estimator): every confirmed track at every epoch of its grid (``tracks_hz``; Odometry,
+  ``child_frame_id`` ``track_<id>``), scored as a set against every UAV's truth on
+  ``truth/<vehicle>/fix`` (the vehicles listed in ``vehicles``, or, with ``vehicles`` empty,
+  every such topic the node discovers) like the multi-UAV benchmark
+  (:mod:`uav_fusion.core.scoring.gospa`: GOSPA with p 2, c 100 m, alpha 2; per-UAV coverage,
+  errors, ID switches; false-track seconds). The epochs from the first truth sample to the
+  last one (the report), or to the last track message (the periodic log and /diagnostics),
+  are scored; an epoch without a message has no track.
 
-Every message goes into a :class:`uav_fusion.core.scoring.evaluation.Evaluator`; nothing is scored
-on
-arrival, so estimates that arrive before the truth bracketing them are scored exactly once
+Every message goes into a :class:`uav_fusion.core.scoring.evaluation.Evaluator`; nothing is
+scored on arrival, so estimates that arrive before the truth bracketing them are scored
+exactly once
 the report is made. Malformed messages (NaN, wrong frame, zero stamp, bad covariance) are
 counted by topic and reason and dropped. Every ``log_period_s`` the node logs a summary line
 and publishes the rows on ``/diagnostics``. The report (report.md, metrics.csv,

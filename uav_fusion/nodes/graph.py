@@ -101,12 +101,12 @@ class Graph:
             raise
         # the fusion node's inputs: radar/pose + rf/fix (paper) or the clouds (tracker
         # profiles); streams nobody in the graph reads are not replayed
-        if self.fusion.tracker_mode:
+        if self.fusion.input.frames:
             self.radar.pose_stream = False
             if self.radar.pub_tracks is None or self.rf.pub_fixes is None:
                 self.destroy()
                 raise UsageError(
-                    "fusion_node runs a tracker profile: radar_replay publish_tracks and "
+                    "fusion_node runs a tracker: radar_replay publish_tracks and "
                     "rf_replay publish_fixes must be true"
                 )
             self.fusion_radar_pub: Any = self.radar.pub_tracks
@@ -190,10 +190,10 @@ class Graph:
         if self.radar.pub_raw is not None:
             n += self.driver.published_to(self.radar.pub_raw)
         if self.evaluator is not None and bool(self.evaluator.grid_topic):
-            n += f.grid_published
+            n += f.output.grid_published
         if self.evaluator is not None and bool(self.evaluator.tracks_topic):
-            n += f.tracks_published
-        return n + f.steps_published + f.accepted_published
+            n += f.output.tracks_published
+        return n + f.output.steps_published + f.output.accepted_published
 
     def evaluator_caught_up(self) -> bool:
         if self.evaluator is None:

@@ -264,6 +264,26 @@ def msg_to_radar_measurement(
     return Measurement(t=t, source=RADAR, z=np.array((x, y, zz)), R=R, seq=seq)
 
 
+def msg_to_radar_report(
+    msg: PoseWithCovarianceStamped, expected_frame: str | None = None
+) -> RadarFrame:
+    """Pose message -> a radar frame of one report carrying the message's position
+    covariance (``radar/pose``: the paper's selected reports; no track id, class or range).
+
+    Raises :class:`MessageError` like :func:`msg_to_radar_measurement`."""
+    m = msg_to_radar_measurement(msg, expected_frame)
+    R = m.R
+    assert R is not None
+    e, n, u = (float(v) for v in m.z)
+    cov = (R[0, 0], R[0, 1], R[0, 2], R[1, 1], R[1, 2], R[2, 2])
+    trk = RadarTrack(
+        t=m.t, track_id=-1, lat=math.nan, lon=math.nan, h=math.nan, e=e, n=n, u=u,
+        vel_ned=None, uav_prob=None, range_m=None, rcs_dbsm=None,
+        cov=tuple(float(v) for v in cov),  # type: ignore[arg-type]
+    )  # fmt: skip
+    return RadarFrame(t=m.t, tracks=(trk,))
+
+
 # --- RF -----------------------------------------------------------------------------------
 
 
@@ -328,6 +348,18 @@ def msg_to_rf_measurement(
         )
     return Measurement(t=t, source=RF, z=np.array((x, y)), R=None if R is None else np.array(R),
                        seq=seq)
+
+
+def msg_to_rf_attempt(msg: PointStamped, expected_frame: str | None = None) -> RfAttempt:
+    """Point message -> an RF attempt (``rf/fix``; all-NaN: a failed one, ``ok`` False).
+
+    Raises :class:`MessageError` like :func:`msg_to_rf_measurement`."""
+    m = msg_to_rf_measurement(msg, expected_frame)
+    if m is None:
+        t = time_from_stamp(msg.header.stamp)
+        return RfAttempt(t, -1, False, math.nan, math.nan, math.nan, math.nan, None, None, None)
+    e, n = (float(v) for v in m.z)
+    return RfAttempt(m.t, -1, True, math.nan, math.nan, e, n, None, None, None)
 
 
 # --- every report and fix: PointCloud2 (layout: uav_fusion.core.data.clouds) -----------------

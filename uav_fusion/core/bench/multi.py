@@ -48,8 +48,8 @@ from uav_fusion.core.bench.cache import CachedFlight, read_vehicle_labels
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-from uav_fusion.core.estimators.offline import tracker_stream
 from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight
 from uav_fusion.core.scoring.gospa import (
     FlightSamples,
@@ -201,7 +201,7 @@ def multi_score_task(
         raise DataError(cf.folder, None, "no UAV has two truth samples")
     t0 = min(float(tr.t[0]) for tr in truths.values())
     t1 = max(float(tr.t[-1]) for tr in truths.values())
-    stream = list(tracker_stream(flight, task.profile))
+    stream = list(frames_input(flight, task.profile))
     start = time.perf_counter()
     tracker = (
         MultiTracker(task.profile, task.site) if make_tracker is None else make_tracker(flight)

@@ -1,15 +1,17 @@
-"""The estimator: the paper's gated asynchronous constant-velocity Kalman filter, and the
-tracker (every radar object scored, component filters, smoothing; ``tracker.py``).
+"""The estimators: the paper's gated asynchronous constant-velocity Kalman filter, the
+single-UAV tracker and the multi-UAV tracker, behind one interface (:mod:`.base`).
 
 Public API (pure Python + numpy/scipy, no ROS)::
 
-    profile = load_profile("paper")              # config/profiles/paper.yaml
-    result = run_flight(flight, profile, site)   # offline: RunResult(steps, counters)
-    est = FusionEstimator(profile, site)          # streaming: what the ROS node wraps
-    for item in flight_measurements(flight, profile, site):
-        steps = est.process_frame(item) if isinstance(item, list) else est.process(item)
+    profile = load_profile("tracker")                # config/profiles/tracker.yaml
+    result = run_flight(flight, profile, site)       # offline: RunResult(steps, grid, counters)
+    est = make_estimator(profile, site, grid_hz=10)  # streaming: what the fusion node drives
+    for item in est.flight_input(flight):            # radar frames and RF attempts, time order
+        out = feed(est, item)                        # Outputs(steps, grid, tracks, smoothed)
 """
 
+from uav_fusion.core.estimators.base import ESTIMATORS, Estimator, drive, feed, make_estimator
+from uav_fusion.core.estimators.grid import Outputs
 from uav_fusion.core.estimators.kalman import CvKalman, pack_r
 from uav_fusion.core.estimators.models import (
     cv_process_noise,
@@ -24,25 +26,27 @@ from uav_fusion.core.estimators.offline import (
     run_stream,
     run_tracker,
     smooth_steps,
-    tracker_stream,
 )
-from uav_fusion.core.estimators.paper import STATUSES, FusionEstimator, Step
+from uav_fusion.core.estimators.paper import FusionEstimator
 from uav_fusion.core.estimators.profile import Profile, load_profile, profile_from_dict
 from uav_fusion.core.estimators.selection import (
     StreamInfo,
     build_stream,
     flight_measurements,
+    frames_input,
     largest_track_id,
 )
+from uav_fusion.core.estimators.steps import STATUSES, Step
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep, TrackEstimate
-from uav_fusion.core.scoring.noise import RNoiseEstimate, estimate_r
 
 __all__ = [
+    "ESTIMATORS",
     "STATUSES",
     "CvKalman",
+    "Estimator",
     "FusionEstimator",
+    "Outputs",
     "Profile",
-    "RNoiseEstimate",
     "RunResult",
     "Step",
     "StreamInfo",
@@ -52,12 +56,15 @@ __all__ = [
     "build_stream",
     "cv_process_noise",
     "cv_transition",
-    "estimate_r",
+    "drive",
+    "feed",
     "flight_measurements",
+    "frames_input",
     "kf_predict",
     "kf_update_joseph",
     "largest_track_id",
     "load_profile",
+    "make_estimator",
     "pack_r",
     "position_h",
     "profile_from_dict",
@@ -65,5 +72,4 @@ __all__ = [
     "run_stream",
     "run_tracker",
     "smooth_steps",
-    "tracker_stream",
 ]

@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimators.kalman import CvKalman
-from uav_fusion.core.estimators.paper import (
+from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.steps import (
     COASTED,
     DISCARDED,
     INITIALISED,
@@ -44,7 +45,6 @@ from uav_fusion.core.estimators.paper import (
     USED,
     Step,
 )
-from uav_fusion.core.estimators.profile import Profile
 
 FloatArray = npt.NDArray[np.float64]
 Predict = Callable[[FloatArray, FloatArray, float], tuple[FloatArray, FloatArray]]
@@ -123,7 +123,117 @@ class GridState:
     last_source: str = ""
 
 
-class GridEmitter:
+@dataclass(frozen=True)
+class TrackOutput:
+    """One confirmed track of a multi-UAV estimator at a time: id, state, covariance, UAV
+    probability, emitter."""
+
+    track_id: int
+    t: float
+    x: FloatArray
+    P: FloatArray
+    uav_prob: float
+    emitter: str | None
+    radar_object: int | None
+    last_update_t: float
+
+
+@dataclass(frozen=True)
+class GridEpoch:
+    """The confirmed tracks of a multi-UAV estimator at one grid time."""
+
+    t: float
+    tracks: tuple[TrackOutput, ...]
+
+
+#: A fixed-lag smoothed estimate: time, state, covariance.
+Smoothed = tuple[float, FloatArray, FloatArray]
+
+
+@dataclass(slots=True)
+class Outputs:
+    """What an estimator gives for the input it was just handed (or for time passing):
+
+    - ``steps``: one :class:`~uav_fusion.core.estimators.steps.Step` per measurement (the
+      paper's filter and the single-UAV tracker; Table II reads them);
+    - ``grid``: the fixed-rate output, one :class:`GridState` per epoch passed (for the
+      multi-UAV tracker: its most UAV-like track);
+    - ``tracks``: every confirmed track at every epoch passed (the multi-UAV tracker);
+    - ``smoothed``: estimates that became final in the fixed-lag smoother (profiles with a
+      finite ``smoother.lag_s``, when the estimator smooths live).
+    """
+
+    steps: list[Step] = field(default_factory=list)
+    grid: list[GridState] = field(default_factory=list)
+    tracks: list[GridEpoch] = field(default_factory=list)
+    smoothed: list[Smoothed] = field(default_factory=list)
+
+    def add(self, other: Outputs) -> None:
+        """Append ``other``'s outputs after these."""
+        self.steps += other.steps
+        self.grid += other.grid
+        self.tracks += other.tracks
+        self.smoothed += other.smoothed
+
+    def __bool__(self) -> bool:
+        return bool(self.steps or self.grid or self.tracks or self.smoothed)
+
+
+class EpochClock:
+    """The grid epochs ``k / frequency_hz`` (unix seconds) an output emits, handed out in
+    order: none before ``t0`` (default: the first time asked about) or after ``t1``. Shared by
+    the single-track output (:class:`GridEmitter`) and the multi-UAV one
+    (:class:`~uav_fusion.core.estimators.multi.MultiGrid`)."""
+
+    def __init__(self, frequency_hz: float, t0: float | None = None, t1: float | None = None):
+        if not (math.isfinite(frequency_hz) and frequency_hz > 0):
+            raise ValueError(f"frequency_hz must be finite and > 0, got {frequency_hz}")
+        self.frequency_hz = float(frequency_hz)
+        self._k: int | None = None if t0 is None else self.first_epoch(float(t0))
+        self._t1 = math.inf if t1 is None else float(t1)
+
+    def epoch_time(self, k: int) -> float:
+        return k / self.frequency_hz
+
+    def first_epoch(self, t: float) -> int:
+        """The smallest ``k`` with ``k / frequency >= t``."""
+        k = math.ceil(t * self.frequency_hz)
+        while self.epoch_time(k - 1) >= t:
+            k -= 1
+        while self.epoch_time(k) < t:
+            k += 1
+        return k
+
+    @property
+    def bounded(self) -> bool:
+        """Whether the output has an end time ``t1``."""
+        return math.isfinite(self._t1)
+
+    @property
+    def end(self) -> float:
+        """The output's end time ``t1`` (inf: none)."""
+        return self._t1
+
+    def take(self, t: float, inclusive: bool) -> list[int]:
+        """The next epochs before ``t`` (``inclusive``: up to and including ``t``), at most up
+        to ``t1``; they are handed out once."""
+        k = self._k
+        if k is None:
+            k = self.first_epoch(t)
+        ks: list[int] = []
+        hz = self.frequency_hz
+        t1 = self._t1
+        while True:
+            b = k / hz
+            if b > t1 or b > t or (b == t and not inclusive):
+                break
+            ks.append(k)
+            k += 1
+        self._k = k
+        return ks
+
+
+class GridEmitter(EpochClock):
     """Fixed-rate output from track snapshots (see the module docstring).
 
     ``frequency_hz``: epochs at ``k / frequency_hz`` (unix seconds); ``max_coast_s``: a track
@@ -140,29 +250,13 @@ class GridEmitter:
         t0: float | None = None,
         t1: float | None = None,
     ) -> None:
-        if not (math.isfinite(frequency_hz) and frequency_hz > 0):
-            raise ValueError(f"frequency_hz must be finite and > 0, got {frequency_hz}")
+        super().__init__(frequency_hz, t0, t1)
         if max_coast_s is not None and not max_coast_s >= 0:
             raise ValueError(f"max_coast_s must be >= 0 or None, got {max_coast_s}")
-        self.frequency_hz = float(frequency_hz)
         self.max_coast_s = math.inf if max_coast_s is None else float(max_coast_s)
         self.predict = predict
-        self._k: int | None = None if t0 is None else self.first_epoch(float(t0))
-        self._t1 = math.inf if t1 is None else float(t1)
         self._snap: TrackSnapshot | None = None
         self._closed = -math.inf  # every epoch <= this has been emitted
-
-    def epoch_time(self, k: int) -> float:
-        return k / self.frequency_hz
-
-    def first_epoch(self, t: float) -> int:
-        """The smallest ``k`` with ``k / frequency >= t``."""
-        k = math.ceil(t * self.frequency_hz)
-        while self.epoch_time(k - 1) >= t:
-            k -= 1
-        while self.epoch_time(k) < t:
-            k += 1
-        return k
 
     @property
     def snapshot(self) -> TrackSnapshot | None:
@@ -178,18 +272,14 @@ class GridEmitter:
             raise ValueError(f"snapshot at {t} is older than the last one ({self._snap.t})")
         if t <= self._closed:
             raise ValueError(f"snapshot at {t} is not after the emitted grid ({self._closed})")
-        if self._k is None:
-            self._k = self.first_epoch(t)
-        out = self._emit(lambda b: b < t)
+        out = [self.state_at(k) for k in self.take(t, inclusive=False)]
         self._snap = snap
         return out
 
     def advance(self, t: float) -> list[GridState]:
         """Declare every time up to ``t`` processed: emits every epoch ``<= t``."""
         t = float(t)
-        if self._k is None:
-            self._k = self.first_epoch(t)
-        out = self._emit(lambda b: b <= t)
+        out = [self.state_at(k) for k in self.take(t, inclusive=True)]
         self._closed = max(self._closed, t)
         return out
 
@@ -198,19 +288,6 @@ class GridEmitter:
         if not math.isfinite(self._t1):
             raise ValueError("finish() needs the emitter's t1")
         return self.advance(self._t1)
-
-    def _emit(self, before: Callable[[float], bool]) -> list[GridState]:
-        out: list[GridState] = []
-        k = self._k
-        assert k is not None
-        while True:
-            b = self.epoch_time(k)
-            if b > self._t1 or not before(b):
-                break
-            out.append(self.state_at(k))
-            k += 1
-        self._k = k
-        return out
 
     def state_at(self, k: int) -> GridState:
         """The state published at epoch ``k`` from the current snapshot."""
@@ -306,11 +383,26 @@ class StepGrid:
         self._last_t = max(self._last_t, float(t))
         return self.emitter.advance(t)
 
+    def finish(self) -> list[GridState]:
+        """The input ended: the epochs up to the output's end time ``t1`` (none without one)."""
+        return self.emitter.finish() if self.emitter.bounded else []
+
     def feed_steps(self, steps: Iterable[Step]) -> list[GridState]:
         out: list[GridState] = []
         for s in steps:
             out.extend(self.feed_step(s))
         return out
+
+
+def step_outputs(grid: StepGrid | None, steps: list[Step]) -> Outputs:
+    """A single-track estimator's outputs for ``steps``: the steps and the epochs of the
+    fixed-rate output ``grid`` (None: not kept) they pass."""
+    out = Outputs(steps)
+    if grid is not None:
+        g = out.grid
+        for s in steps:
+            g += grid.feed_step(s)
+    return out
 
 
 @dataclass(frozen=True)

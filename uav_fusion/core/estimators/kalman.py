@@ -66,6 +66,11 @@ def pack_r(R: FloatArray) -> PackedR:
     return tuple(float(e) for e in v)
 
 
+def expand_cov3(c: Sequence[float]) -> FloatArray:
+    """Full symmetric 3x3 array from its upper triangle (xx, xy, xz, yy, yz, zz)."""
+    return np.array(((c[0], c[1], c[2]), (c[1], c[3], c[4]), (c[2], c[4], c[5])), dtype=float)
+
+
 class CvKalman:
     """Six-state constant-velocity Kalman filter for 2D/3D position measurements."""
 

@@ -75,13 +75,13 @@ A track's UAV probability is the logistic of the UAV score of the radar object i
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
+from uav_fusion.core.estimators.base import drive
 from uav_fusion.core.estimators.components import (
     Deleter,
     MofN,
@@ -90,11 +90,13 @@ from uav_fusion.core.estimators.components import (
     scale_packed,
 )
 from uav_fusion.core.estimators.filters import MotionFilter
+from uav_fusion.core.estimators.grid import EpochClock, GridEpoch, GridState, Outputs, TrackOutput
 from uav_fusion.core.estimators.kalman import PackedR, expand_upper
 from uav_fusion.core.estimators.multi_settings import MultiSettings
 from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
-from uav_fusion.core.estimators.paper import nis_gate
 from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.estimators.steps import Step, nis_gate
 from uav_fusion.core.estimators.tracker import (
     alignment_from_profile,
     motion_filter_from_profile,
@@ -104,7 +106,7 @@ from uav_fusion.core.estimators.tracker import (
     rf_model_from_profile,
     robust_from_profile,
 )
-from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
+from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
@@ -163,25 +165,24 @@ class UavTrack:
         self.close_since: dict[int, float] = {}
 
 
-@dataclass(frozen=True)
-class TrackOutput:
-    """One confirmed track at a time: id, state, covariance, UAV probability, emitter."""
-
-    track_id: int
-    t: float
-    x: FloatArray
-    P: FloatArray
-    uav_prob: float
-    emitter: str | None
-    radar_object: int | None
-    last_update_t: float
-
-
 class MultiTracker:
     """Every UAV at once (see the module text)."""
 
-    def __init__(self, profile: Profile, site: Site, settings: MultiSettings | None = None) -> None:
+    kind = "multi"
+    fixed_rate = True
+    reads = "frames"
+
+    def __init__(
+        self,
+        profile: Profile,
+        site: Site,
+        settings: MultiSettings | None = None,
+        grid_hz: float = 10.0,
+        t0: float | None = None,
+        t1: float | None = None,
+    ) -> None:
         self.profile = profile
+        self.site = site
         self.settings = settings or profile.multi
         self.cfg = profile.score
         st = self.settings
@@ -213,6 +214,58 @@ class MultiTracker:
         self.tracks: list[UavTrack] = []
         self._next_id = 1
         self.counters: dict[str, int] = {}
+        self._args = (settings, grid_hz, t0, t1)
+        self.grid = MultiGrid(self, grid_hz, t0, t1)
+
+    # --- the estimator interface (uav_fusion.core.estimators.base) ----------------------
+    def radar_frame(self, frame: RadarFrame) -> Outputs:
+        out = self._outputs(self.grid.before(frame.t))
+        self.process_radar_frame(frame)
+        return out
+
+    def rf_attempt(self, attempt: RfAttempt) -> Outputs:
+        out = self._outputs(self.grid.before(attempt.t))
+        self.process_rf(attempt)
+        return out
+
+    def advance(self, t: float) -> Outputs:
+        return self._outputs(self.grid.advance(t))
+
+    def finish(self) -> Outputs:
+        g = self.grid
+        return self._outputs(g.advance(g.end)) if g.bounded else Outputs()
+
+    def restart(self, reason: str) -> None:
+        """A new timeline: no tracks, no radar objects, a new grid."""
+        del reason
+        self.__init__(self.profile, self.site, *self._args)  # type: ignore[misc]
+
+    def measurement(self, step: Step) -> tuple[FloatArray, FloatArray | None] | None:
+        return None  # no filter steps
+
+    def flight_input(self, flight: Flight) -> list[RadarFrame | RfAttempt]:
+        return frames_input(flight, self.profile)
+
+    def status(self) -> dict[str, object]:
+        confirmed = [t for t in self.tracks if t.confirmed]
+        return {
+            "multi_tracks_confirmed": len(confirmed),
+            "multi_track_ids": " ".join(str(t.id) for t in confirmed) or "-",
+        }
+
+    def _outputs(self, epochs: list[GridEpoch]) -> Outputs:
+        """The epochs, and on the single-track output each epoch's most UAV-like track."""
+        hz = self.grid.frequency_hz
+        grid = [
+            GridState(
+                round(ep.t * hz), ep.t, o.x, o.P, True, True, ep.t - o.last_update_t,
+                o.track_id, "",
+            )
+            for ep in epochs
+            if ep.tracks
+            for o in ep.tracks[:1]
+        ]  # fmt: skip
+        return Outputs(grid=grid, tracks=epochs)
 
     @property
     def alignment(self) -> RadarAlignment | None:
@@ -641,15 +694,7 @@ class MultiTracker:
         self._reject(tr)
 
 
-@dataclass(frozen=True)
-class GridEpoch:
-    """The confirmed tracks at one grid time."""
-
-    t: float
-    tracks: tuple[TrackOutput, ...]
-
-
-class MultiGrid:
+class MultiGrid(EpochClock):
     """The confirmed tracks at every grid epoch ``k / frequency_hz``, emitted as processed time
     passes it (the same for a live node and an offline run): call :meth:`before` with an
     item's time before feeding the item to the tracker, :meth:`advance` when everything up to
@@ -665,54 +710,30 @@ class MultiGrid:
         t0: float | None = None,
         t1: float | None = None,
     ) -> None:
-        if not (math.isfinite(frequency_hz) and frequency_hz > 0):
-            raise ValueError(f"grid rate must be finite and > 0, got {frequency_hz}")
+        super().__init__(frequency_hz, t0, t1)
         self.tracker = tracker
-        self.frequency_hz = float(frequency_hz)
-        self._k: int | None = None if t0 is None else self.first_epoch(float(t0))
-        self._t1 = math.inf if t1 is None else float(t1)
         self.max_coast_s = tracker.profile.max_coast_s
 
-    def epoch_time(self, k: int) -> float:
-        return k / self.frequency_hz
-
-    def first_epoch(self, t: float) -> int:
-        """The smallest ``k`` with ``k / frequency >= t``."""
-        k = math.ceil(t * self.frequency_hz)
-        while self.epoch_time(k - 1) >= t:
-            k -= 1
-        while self.epoch_time(k) < t:
-            k += 1
-        return k
-
-    def _emit(self, inside: Callable[[float], bool]) -> list[GridEpoch]:
+    def _epochs(self, ks: list[int]) -> list[GridEpoch]:
         out: list[GridEpoch] = []
-        if self._k is None:
-            return out
-        while True:
-            g = self.epoch_time(self._k)
-            if g > self._t1 or not inside(g):
-                return out
-            mc = self.max_coast_s
+        mc = self.max_coast_s
+        for k in ks:
+            g = self.epoch_time(k)
             tracks = tuple(
                 o
                 for o in self.tracker.outputs(g)
                 if o.t <= g and (mc is None or g - o.last_update_t <= mc)
             )
             out.append(GridEpoch(g, tracks))
-            self._k += 1
+        return out
 
     def before(self, t: float) -> list[GridEpoch]:
         """An item at ``t`` is about to be processed: every epoch before ``t``."""
-        if self._k is None:
-            self._k = self.first_epoch(t)
-        return self._emit(lambda g: g < t)
+        return self._epochs(self.take(t, inclusive=False))
 
     def advance(self, t: float) -> list[GridEpoch]:
         """Everything up to ``t`` has been processed: every epoch up to ``t``."""
-        if self._k is None:
-            self._k = self.first_epoch(t)
-        return self._emit(lambda g: g <= t)
+        return self._epochs(self.take(t, inclusive=True))
 
 
 def run_multi(
@@ -722,18 +743,10 @@ def run_multi(
     t_start: float,
     t_end: float,
 ) -> list[GridEpoch]:
-    """Feed ``stream`` (time order) through ``tracker`` and take its confirmed tracks at every
-    grid epoch ``k / grid_hz`` in ``[t_start, t_end]`` (:class:`MultiGrid`)."""
-    grid = MultiGrid(tracker, grid_hz, t_start, t_end)
-    out: list[GridEpoch] = []
-    for item in stream:
-        out.extend(grid.before(item.t))
-        if isinstance(item, RadarFrame):
-            tracker.process_radar_frame(item)
-        else:
-            tracker.process_rf(item)
-    out.extend(grid.advance(t_end))
-    return out
+    """Drive ``tracker`` over ``stream`` (time order) with its output at ``grid_hz`` on
+    ``[t_start, t_end]``: its confirmed tracks at every epoch."""
+    tracker.grid = MultiGrid(tracker, grid_hz, t_start, t_end)
+    return drive(tracker, stream, t_end).tracks
 
 
 def velocity_nis(

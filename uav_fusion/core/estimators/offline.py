@@ -1,23 +1,24 @@
-"""Offline run of the estimator over a flight, and the run's outputs (counts, CSV)."""
+"""Offline runs: a profile's estimator over a whole flight, and the run's outputs (counts, CSV)."""
 
 from __future__ import annotations
 
 import csv
-import math
 import struct
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
-from uav_fusion.core.estimators.paper import FusionEstimator, Step
+from uav_fusion.core.estimators.base import drive, make_estimator
+from uav_fusion.core.estimators.paper import FusionEstimator
 from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.estimators.selection import StreamInfo, StreamItem, build_stream
+from uav_fusion.core.estimators.selection import StreamInfo, StreamItem, input_info
 from uav_fusion.core.estimators.smoothing import Filtered, fixed_lag
+from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
-from uav_fusion.core.records import RADAR, RF, Flight, Measurement, RadarFrame, RfAttempt
+from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
@@ -113,7 +114,8 @@ class RunResult:
 
 
 def run_stream(est: FusionEstimator, stream: Iterable[StreamItem]) -> list[Step]:
-    """Feed a stream (single measurements and candidate lists) through an estimator."""
+    """Feed a measurement stream (single measurements and candidate lists) through the paper's
+    filter directly (its own API, as the oracle tests use it)."""
     steps: list[Step] = []
     for item in stream:
         if isinstance(item, list):
@@ -123,50 +125,15 @@ def run_stream(est: FusionEstimator, stream: Iterable[StreamItem]) -> list[Step]
     return steps
 
 
-def tracker_stream(flight: Flight, profile: Profile) -> Iterator[RadarFrame | RfAttempt]:
-    """A flight's raw radar frames and successful RF attempts in (time, radar before RF, file
-    position) order: what the :class:`Tracker` consumes."""
-    keyed: list[tuple[float, int, int]] = []
-    if profile.use_radar:
-        keyed.extend((fr.t, 0, i) for i, fr in enumerate(flight.radar) if fr.tracks)
-    if profile.use_rf:
-        keyed.extend((a.t, 1, i) for i, a in enumerate(flight.rf) if a.ok)
-    keyed.sort()
-    for _, rank, i in keyed:
-        yield flight.radar[i] if rank == 0 else flight.rf[i]
-
-
-@dataclass(eq=False, slots=True)
-class TrackerItem(Measurement):
-    """A radar frame or an RF attempt travelling through a live timeline
-    (:class:`~uav_fusion.core.live.timeline.Timeline`) as a :class:`Measurement`: ``t`` and
-    ``source`` order it, ``z`` (every report's position, or the fix's) recognises repeats,
-    ``item`` is what the :class:`Tracker` consumes."""
-
-    item: RadarFrame | RfAttempt | None = None
-
-
-def tracker_item(item: RadarFrame | RfAttempt, seq: int = 0) -> TrackerItem:
-    """Wrap a radar frame or an RF attempt for a live timeline."""
-    if isinstance(item, RadarFrame):
-        z = np.array([v for trk in item.tracks for v in (trk.e, trk.n, trk.u)], dtype=float)
-        return TrackerItem(t=item.t, source=RADAR, z=z, seq=seq, item=item)
-    return TrackerItem(t=item.t, source=RF, z=np.array((item.e, item.n)), seq=seq, item=item)
-
-
-def feed_tracker(tracker: Tracker, item: RadarFrame | RfAttempt) -> list[TrackerStep]:
-    """One radar frame or RF attempt through ``tracker`` (what :func:`run_tracker` does per
-    item)."""
-    if isinstance(item, RadarFrame):
-        return tracker.process_radar_frame(item)
-    return tracker.process_rf(item)
-
-
 def run_tracker(tracker: Tracker, stream: Iterable[RadarFrame | RfAttempt]) -> list[TrackerStep]:
-    """Feed radar frames and RF attempts through a :class:`Tracker`."""
+    """The steps of a :class:`Tracker` fed ``stream`` (time order)."""
     steps: list[TrackerStep] = []
     for item in stream:
-        steps.extend(feed_tracker(tracker, item))
+        steps.extend(
+            tracker.process_radar_frame(item)
+            if isinstance(item, RadarFrame)
+            else tracker.process_rf(item)
+        )
     return steps
 
 
@@ -196,43 +163,19 @@ def smooth_steps(steps: list[TrackerStep], lag_s: float) -> list[TrackerStep]:
     return out
 
 
-def _run_tracker_flight(flight: Flight, profile: Profile, site: Site) -> RunResult:
-    tracker = Tracker(profile, site)
-    steps = run_tracker(tracker, tracker_stream(flight, profile))
-    if profile.smoother_lag_s is not None:
-        steps = smooth_steps(steps, profile.smoother_lag_s)
-    reports = sum(len(fr.tracks) for fr in flight.radar) if profile.use_radar else 0
-    info = StreamInfo(
-        radar_frames=len(flight.radar) if profile.use_radar else 0,
-        radar_reports=reports,
-        radar_selected=reports,
-        not_selected=0,
-        selected_track_id=None,
-        rf_attempts=len(flight.rf) if profile.use_rf else 0,
-        rf_fixes=sum(
-            1 for a in flight.rf if a.ok and math.isfinite(a.e) and math.isfinite(a.n)
-        )
-        if profile.use_rf
-        else 0,
-    )
-    counters = dict(tracker.counters)
-    counters["radar_reports"] = reports
-    counters["radar_objects"] = len(tracker.objects.objects)
-    return RunResult(
-        steps=list[Step](steps), counters=counters, info=info, profile_name=profile.name
-    )
-
-
 def run_flight(flight: Flight, profile: Profile, site: Site) -> RunResult:
-    """``flight_measurements`` fed through a fresh :class:`FusionEstimator`; a profile with
-    ``association.mode: track_score`` runs the :class:`Tracker` over every radar report
-    instead (then fixed-lag smoothing when ``smoother.lag_s`` is set)."""
-    if profile.uses_tracker:
-        return _run_tracker_flight(flight, profile, site)
-    stream, info = build_stream(flight, profile, site)
-    est = FusionEstimator(profile, site)
-    steps = run_stream(est, stream)
+    """The profile's single-track estimator (the paper's filter or the tracker,
+    :func:`~uav_fusion.core.estimators.base.make_estimator`) over everything it reads of
+    ``flight``, then, with ``smoother.lag_s``, each track segment smoothed over the whole run.
+    The fixed-rate output of the steps: :func:`~uav_fusion.core.estimators.grid.grid_from_steps`."""
+    est = make_estimator(profile, site, grid_hz=None)
+    steps = drive(est, est.flight_input(flight)).steps
+    lag = profile.smoother_lag_s
+    if lag is not None:
+        steps = list[Step](smooth_steps(list[TrackerStep](steps), lag))  # type: ignore[arg-type]
+    info = input_info(flight, profile, est.reads)
     counters = dict(est.counters)
     counters["radar_reports"] = info.radar_reports
-    counters["rejected_not_selected_offline"] = info.not_selected
+    if info.not_selected:
+        counters["rejected_not_selected_offline"] = info.not_selected
     return RunResult(steps=steps, counters=counters, info=info, profile_name=profile.name)

@@ -25,171 +25,74 @@ measurement that made it fail starts a new tentative track. A measurement of a s
 (the tentative track is dropped and the report starts a confirmed track). A tentative track's
 estimates are not published as filter estimates: its steps have status ``tentative``.
 
-Every measurement yields exactly one :class:`Step`. Statuses:
+Every measurement yields exactly one :class:`~uav_fusion.core.estimators.steps.Step`
+(statuses: :mod:`uav_fusion.core.estimators.steps`).
 
-* ``initialised`` / ``reset``: a confirmed track (re)started from this measurement
-  (``reset`` when a previous track was dropped; ``reason`` says why);
-* ``updated``: accepted and fused;
-* ``coasted``: rejected by the NIS gate; the estimate is the prediction;
-* ``tentative``: the measurement started a tentative track (``reason`` ``start``) or was
-  tested against one (``hit``, or the miss's ``nis`` / ``speed``); not a filter estimate;
-* ``discarded``: not a filter step at all (``range_gate``, ``class_prob``, ``not_selected``,
-  ``out_of_order``, ``no_track``, ``invalid``); the track is not changed.
-
-The paper's "KF all steps" are the steps that are neither discarded nor tentative; its
-"updated estimates" the steps that used their measurement (updated, initialised, reset) and its
-"coasted estimates" the coasted steps. The step that confirms a tentative track is ``updated``.
+As an :class:`~uav_fusion.core.estimators.base.Estimator` it takes radar frames (the selected
+reports; several in one frame are candidates) and RF attempts, and keeps the fixed-rate output
+of its steps (:class:`~uav_fusion.core.estimators.grid.StepGrid`); its ``fusion/odom`` is every
+filter step, as in the paper.
 """
 
 from __future__ import annotations
 
-import functools
 import math
-import struct
 from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
-from scipy.stats import chi2
 
-from uav_fusion.core.estimators.kalman import CvKalman, PackedR, expand_upper, pack_r
+from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
+from uav_fusion.core.estimators.kalman import CvKalman, PackedR, expand_cov3, pack_r
 from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.records import RADAR, RF, Measurement
+from uav_fusion.core.estimators.selection import selected_input
+from uav_fusion.core.estimators.steps import (
+    COASTED,
+    DISCARDED,
+    INITIALISED,
+    NAN_STATE,
+    RESET,
+    TENTATIVE,
+    UPDATED,
+    Step,
+    nis_gate,
+    pack_state,
+)
+from uav_fusion.core.records import (
+    RADAR,
+    RF,
+    Flight,
+    Measurement,
+    RadarFrame,
+    RadarTrack,
+    RfAttempt,
+)
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
 
-UPDATED = "updated"
-COASTED = "coasted"
-INITIALISED = "initialised"
-RESET = "reset"
-DISCARDED = "discarded"
-TENTATIVE = "tentative"
-STATUSES = (UPDATED, COASTED, INITIALISED, RESET, TENTATIVE, DISCARDED)
-NOT_COUNTED = frozenset((DISCARDED, TENTATIVE))
-USED = frozenset((UPDATED, INITIALISED, RESET))
-
+#: how many recent measurements the interface keeps for :meth:`FusionEstimator.measurement`
+_RECENT = 4096
 _DIMS = {RADAR: 3, RF: 2}
 _MEAS_KEY = {RADAR: "radar_measurements", RF: "rf_measurements"}
 _UPD_KEY = {RADAR: "updated_radar", RF: "updated_rf"}
-# a step's state: x (6 values) then the upper triangle of P (21 values), as packed doubles
-_STATE = struct.Struct("27d")
-_pack_state = _STATE.pack
-_UNPACK = _STATE.unpack
-_NAN_STATE = _pack_state(*(math.nan,) * 27)
-
-
-@functools.lru_cache(maxsize=64)
-def nis_gate(probability: float, dim: int) -> float:
-    """NIS gate: the chi-square quantile at ``probability`` for ``dim`` degrees of freedom
-    (computed once per pair: estimators are built often, by nodes, tests and sweeps)."""
-    return float(chi2.ppf(probability, dim))
-
-
-class Step:
-    """What the estimator did with one measurement, and the estimate at its time.
-
-    ``x`` (6,) and ``P`` (6, 6) are the state after this measurement (NaN when no track
-    exists); they are built on first access from ``state``, the 27 packed doubles of ``x``
-    and of the upper triangle of ``P`` (row by row). Packed bytes rather than Python floats
-    keep a long run's steps small: fewer objects to allocate, hold and scan for the garbage
-    collector.
-    """
-
-    __slots__ = (
-        "_P",
-        "_state",
-        "_x",
-        "dim",
-        "nis",
-        "reason",
-        "seq",
-        "source",
-        "status",
-        "t",
-        "track_id",
-    )
-
-    def __init__(
-        self,
-        t: float,
-        source: str,
-        status: str,
-        reason: str | None,
-        nis: float | None,
-        state: bytes,
-        dim: int,
-        track_id: int | None,
-        seq: int,
-    ) -> None:
-        self.t = t
-        self.source = source
-        self.status = status
-        self.reason = reason
-        self.nis = nis
-        self._state = state
-        self._x: FloatArray | None = None
-        self._P: FloatArray | None = None
-        self.dim = dim
-        self.track_id = track_id
-        self.seq = seq
-
-    @property
-    def x(self) -> FloatArray:
-        if self._x is None:
-            self._x = np.frombuffer(self._state, dtype=float, count=6).copy()
-        return self._x
-
-    @property
-    def P(self) -> FloatArray:
-        if self._P is None:
-            self._P = expand_upper(np.frombuffer(self._state, dtype=float, count=21, offset=48))
-        return self._P
-
-    @property
-    def values(self) -> tuple[float, ...]:
-        """The 27 packed doubles as Python floats: x (6), then P's upper triangle (21, row by
-        row, :data:`~uav_fusion.core.estimators.kalman.UPPER_INDEX`); no arrays built."""
-        return _UNPACK(self._state)
-
-    @property
-    def updated(self) -> bool:
-        """The estimate used this measurement (updated, initialised or reset)."""
-        return self.status in USED
-
-    @property
-    def validated(self) -> bool:
-        """The measurement passed every gate (NIS included) and updated the track.
-
-        Unlike :attr:`updated` this excludes track starts, whose measurement was not tested
-        against a prediction: the paper's "after validation" rows count these.
-        """
-        return self.status == UPDATED
-
-    @property
-    def coasted(self) -> bool:
-        """The measurement failed the NIS gate; the estimate is the prediction."""
-        return self.status == COASTED
-
-    @property
-    def counted(self) -> bool:
-        """A filter step in the paper's sense: an estimate of a confirmed track (every status
-        except ``discarded`` and ``tentative``)."""
-        return self.status not in NOT_COUNTED
-
-    def __repr__(self) -> str:
-        nis = "None" if self.nis is None else f"{self.nis:.3f}"
-        return (
-            f"Step(t={self.t:.3f}, source={self.source!r}, status={self.status!r}, "
-            f"reason={self.reason!r}, nis={nis}, dim={self.dim}, track_id={self.track_id}, "
-            f"seq={self.seq}, x={np.array2string(self.x, precision=2)})"
-        )
 
 
 class FusionEstimator:
     """Streaming radar + RF fusion (one track). Feed measurements in (t, seq) order."""
 
-    def __init__(self, profile: Profile, site: Site) -> None:
+    kind = "paper"
+    fixed_rate = False  # fusion/odom: every filter step, as in the paper
+    reads = "selected"
+
+    def __init__(
+        self,
+        profile: Profile,
+        site: Site,
+        grid_hz: float | None = None,
+        t0: float | None = None,
+        t1: float | None = None,
+    ) -> None:
         self.profile = profile
         self.site = site
         self._kf = CvKalman(profile.q)
@@ -222,6 +125,80 @@ class FusionEstimator:
         self.consecutive_rejections = 0
         self._pending_reset: str | None = None
         self.counters: dict[str, int] = {}
+        # the estimator interface: the steps' fixed-rate output (None: not kept), the next
+        # measurement's seq, and the latest measurements by seq (views read them back)
+        self._grid_args = (grid_hz, t0, t1)
+        self.grid = StepGrid(profile, grid_hz, t0, t1) if grid_hz is not None else None
+        self._seq = 0
+        self._recent: dict[int, Measurement] = {}
+
+    # --- the estimator interface (uav_fusion.core.estimators.base) ----------------------
+    def radar_frame(self, frame: RadarFrame) -> Outputs:
+        """The selected reports of one radar frame: candidates of one filter step
+        (:meth:`process_frame`; a report's own covariance, when it carries one, is its R)."""
+        ms = [self._radar_measurement(trk) for trk in frame.tracks]
+        return self._outputs(self.process_frame(ms), ms)
+
+    def rf_attempt(self, attempt: RfAttempt) -> Outputs:
+        """One RF attempt: a fix with a finite position is one filter step."""
+        a = attempt
+        if not (a.ok and math.isfinite(a.e) and math.isfinite(a.n)):
+            return Outputs()
+        m = Measurement(t=a.t, source=RF, z=np.array((a.e, a.n), float), seq=self._next_seq())
+        return self._outputs(self.process(m), [m])
+
+    def advance(self, t: float) -> Outputs:
+        return Outputs(grid=self.grid.advance(t)) if self.grid is not None else Outputs()
+
+    def finish(self) -> Outputs:
+        return Outputs(grid=self.grid.finish()) if self.grid is not None else Outputs()
+
+    def restart(self, reason: str) -> None:
+        self.restart_timeline(reason)
+        if self.grid is not None:
+            self.grid = StepGrid(self.profile, *self._grid_args)  # type: ignore[arg-type]
+
+    def measurement(self, step: Step) -> tuple[FloatArray, FloatArray | None] | None:
+        m = self._recent.get(step.seq)
+        if m is None:
+            return None
+        R = m.R if m.R is not None else (self.profile.r_radar if m.source == RADAR else None)
+        return m.z, R
+
+    def status(self) -> dict[str, object]:
+        if not self.active:
+            return {"track": "none"}
+        return {"track": "tentative" if self.tentative else "confirmed"}
+
+    def flight_input(self, flight: Flight) -> list[RadarFrame | RfAttempt]:
+        return selected_input(flight, self.profile)[0]
+
+    def _next_seq(self) -> int:
+        seq = self._seq
+        self._seq = seq + 1
+        return seq
+
+    def _radar_measurement(self, trk: RadarTrack) -> Measurement:
+        c = trk.cov
+        return Measurement(
+            t=trk.t,
+            source=RADAR,
+            z=np.array((trk.e, trk.n, trk.u), dtype=float),
+            R=None if c is None else expand_cov3(c),
+            track_id=trk.track_id if trk.track_id >= 0 else None,
+            uav_prob=trk.uav_prob,
+            range_m=trk.range_m,
+            seq=self._next_seq(),
+        )
+
+    def _outputs(self, steps: list[Step], ms: Sequence[Measurement]) -> Outputs:
+        recent = self._recent
+        for m in ms:
+            recent[m.seq] = m
+        if len(recent) > _RECENT:
+            for k in list(recent)[: len(recent) - _RECENT // 2]:
+                del recent[k]
+        return step_outputs(self.grid, steps)
 
     # --- public API ---------------------------------------------------------------------
     def reset(self, reason: str) -> None:
@@ -393,9 +370,9 @@ class FusionEstimator:
     def _snapshot(self, m: Measurement, status: str, reason: str | None, nis: float | None) -> Step:
         if self.active:
             kf = self._kf
-            state = _pack_state(*kf.x, *kf.P)
+            state = pack_state(*kf.x, *kf.P)
         else:
-            state = _NAN_STATE
+            state = NAN_STATE
         return Step(m.t, m.source, status, reason, nis, state, len(m.z), m.track_id, m.seq)
 
     def _discard(self, m: Measurement, reason: str, nis: float | None = None) -> Step:
@@ -412,7 +389,7 @@ class FusionEstimator:
         self.last_used_t = m.t
         self.tentative = False
         kf = self._kf
-        state = _pack_state(*kf.x, *kf.P)
+        state = pack_state(*kf.x, *kf.P)
         return Step(m.t, m.source, UPDATED, None, nis, state, len(m.z), m.track_id, m.seq)
 
     def _rejected(self, m: Measurement, nis: float) -> Step:

@@ -112,6 +112,11 @@ class Profile:
         return self.association or self.radar_selection
 
     @property
+    def estimator(self) -> str:
+        """The estimator the profile names: ``paper`` or ``tracker``."""
+        return "tracker" if self.association == "track_score" else "paper"
+
+    @property
     def uses_tracker(self) -> bool:
         """Run by :class:`~uav_fusion.core.estimators.tracker.Tracker` (every radar object)
         rather than the paper's :class:`~uav_fusion.core.estimators.paper.FusionEstimator`."""

@@ -22,6 +22,7 @@ that order, so a consumer that processes by (t, seq) reproduces the offline run 
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -31,7 +32,15 @@ import numpy as np
 from uav_fusion.core.data.uav_class import uav_class_tracks
 from uav_fusion.core.estimators.kalman import PackedR
 from uav_fusion.core.estimators.profile import Profile, load_profile
-from uav_fusion.core.records import RADAR, RF, Flight, Measurement, RadarFrame, RadarTrack
+from uav_fusion.core.records import (
+    RADAR,
+    RF,
+    Flight,
+    Measurement,
+    RadarFrame,
+    RadarTrack,
+    RfAttempt,
+)
 from uav_fusion.core.site import Site
 
 StreamItem = Measurement | list[Measurement]
@@ -76,11 +85,12 @@ def _radar_measurement(trk: RadarTrack, seq: int) -> Measurement:
     )
 
 
-def build_stream(
-    flight: Flight, profile: Profile, site: Site
-) -> tuple[list[StreamItem], StreamInfo]:
-    """The measurement stream of a flight plus a summary of what was selected."""
-    del site  # the stream does not depend on the site; the estimator applies the range gate
+def selected_input(
+    flight: Flight, profile: Profile
+) -> tuple[list[RadarFrame | RfAttempt], StreamInfo]:
+    """What the paper's estimator reads from a flight, in processing order: the radar frames
+    cut to the selected reports (frames without one left out) and the RF attempts with a
+    finite position; plus a summary of what was selected."""
     keyed: list[tuple[float, int, int]] = []
     if profile.use_radar:
         keyed.extend((fr.t, SOURCE_RANK[RADAR], i) for i, fr in enumerate(flight.radar))
@@ -93,30 +103,20 @@ def build_stream(
     keyed.sort()
     largest = profile.radar_selection == "largest_track"
     sel = largest_track_id(flight.radar) if largest and profile.use_radar else None
-    out: list[StreamItem] = []
-    seq = 0
+    out: list[RadarFrame | RfAttempt] = []
     reports = selected = 0
     for _, rank, i in keyed:
         if rank == SOURCE_RANK[RADAR]:
-            item = flight.radar[i]
-            reports += len(item.tracks)
+            frame = flight.radar[i]
+            reports += len(frame.tracks)
+            kept = frame.tracks
             if largest:
-                for trk in item.tracks:
-                    if trk.track_id == sel:
-                        out.append(_radar_measurement(trk, seq))
-                        seq += 1
-                        selected += 1
-            elif item.tracks:
-                cands = []
-                for trk in item.tracks:
-                    cands.append(_radar_measurement(trk, seq))
-                    seq += 1
-                selected += len(cands)
-                out.append(cands)
+                kept = tuple(trk for trk in kept if trk.track_id == sel)
+            if kept:
+                selected += len(kept)
+                out.append(frame if kept is frame.tracks else RadarFrame(frame.t, kept, frame.line))
         else:
-            a = flight.rf[i]
-            out.append(Measurement(t=a.t, source=RF, z=np.array((a.e, a.n), float), seq=seq))
-            seq += 1
+            out.append(flight.rf[i])
     info = StreamInfo(
         radar_frames=len(flight.radar) if profile.use_radar else 0,
         radar_reports=reports,
@@ -126,6 +126,62 @@ def build_stream(
         rf_attempts=len(flight.rf) if profile.use_rf else 0,
         rf_fixes=rf_fixes,
     )
+    return out, info
+
+
+def frames_input(flight: Flight, profile: Profile) -> list[RadarFrame | RfAttempt]:
+    """What the trackers read from a flight: every radar frame with a report and every RF
+    attempt with a position (``ok``), in (time, radar before RF, file position) order."""
+    keyed: list[tuple[float, int, int]] = []
+    if profile.use_radar:
+        keyed.extend((fr.t, 0, i) for i, fr in enumerate(flight.radar) if fr.tracks)
+    if profile.use_rf:
+        keyed.extend((a.t, 1, i) for i, a in enumerate(flight.rf) if a.ok)
+    keyed.sort()
+    return [flight.radar[i] if rank == 0 else flight.rf[i] for _, rank, i in keyed]
+
+
+def input_info(flight: Flight, profile: Profile, reads: str) -> StreamInfo:
+    """What an estimator reading ``reads`` (``selected`` or ``frames``) takes of ``flight``."""
+    if reads == "selected":
+        return selected_input(flight, profile)[1]
+    reports = sum(len(fr.tracks) for fr in flight.radar) if profile.use_radar else 0
+    fixes = sum(1 for a in flight.rf if a.ok and math.isfinite(a.e) and math.isfinite(a.n))
+    return StreamInfo(
+        radar_frames=len(flight.radar) if profile.use_radar else 0,
+        radar_reports=reports,
+        radar_selected=reports,
+        not_selected=0,
+        selected_track_id=None,
+        rf_attempts=len(flight.rf) if profile.use_rf else 0,
+        rf_fixes=fixes if profile.use_rf else 0,
+    )
+
+
+def build_stream(
+    flight: Flight, profile: Profile, site: Site
+) -> tuple[list[StreamItem], StreamInfo]:
+    """:func:`selected_input` as measurements: with the largest-track selection every
+    selected report on its own, otherwise each frame's reports as one candidate list; ``seq``
+    numbers them in order."""
+    del site  # the stream does not depend on the site; the estimator applies the range gate
+    items, info = selected_input(flight, profile)
+    largest = profile.radar_selection == "largest_track"
+    out: list[StreamItem] = []
+    seq = 0
+    for item in items:
+        if isinstance(item, RadarFrame):
+            ms = [_radar_measurement(trk, seq + j) for j, trk in enumerate(item.tracks)]
+            seq += len(ms)
+            if largest:
+                out.extend(ms)
+            else:
+                out.append(ms)
+        else:
+            out.append(
+                Measurement(t=item.t, source=RF, z=np.array((item.e, item.n), float), seq=seq)
+            )
+            seq += 1
     return out, info
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -28,6 +29,20 @@ import numpy.typing as npt
 from uav_fusion.core.estimators.models import cv_process_noise, cv_transition
 
 FloatArray = npt.NDArray[np.float64]
+
+
+class SmoothableStep(Protocol):
+    """A filter step :class:`SegmentSmoother` can take: a tracker's step."""
+
+    t: float
+    segment: int
+    q_eff: tuple[float, float, float]
+
+    @property
+    def x(self) -> FloatArray: ...
+
+    @property
+    def P(self) -> FloatArray: ...
 
 
 @dataclass(frozen=True)
@@ -133,3 +148,35 @@ class FixedLagSmoother:
             k += 1
         del es[:k]
         return out
+
+
+class SegmentSmoother:
+    """Fixed-lag smoothing of a tracker's steps as they come (a live node): the counted steps
+    of each track segment go through their own :class:`FixedLagSmoother`; a new segment
+    finishes the previous one's window. Returns (t, smoothed x, smoothed P) per estimate
+    that became final."""
+
+    def __init__(self, lag_s: float) -> None:
+        self.lag_s = lag_s
+        self._smoother: FixedLagSmoother | None = None
+        self._segment = -1
+
+    def push(self, step: SmoothableStep) -> list[tuple[float, FloatArray, FloatArray]]:
+        """One counted step (an estimate of a confirmed track)."""
+        out: list[tuple[float, FloatArray, FloatArray]] = []
+        sm = self._smoother
+        if sm is None or step.segment != self._segment:
+            out = self.finish()
+            sm = self._smoother = FixedLagSmoother(self.lag_s)
+            self._segment = step.segment
+        entry = Filtered(step.t, step.x, step.P, step.q_eff)
+        out += [(e.t, xs, Ps) for e, xs, Ps in sm.push(entry)]
+        return out
+
+    def finish(self) -> list[tuple[float, FloatArray, FloatArray]]:
+        """End the current segment's window: its remaining estimates, smoothed."""
+        sm = self._smoother
+        self._smoother = None
+        if sm is None:
+            return []
+        return [(e.t, xs, Ps) for e, xs, Ps in sm.finish()]

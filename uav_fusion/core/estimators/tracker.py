@@ -75,9 +75,13 @@ from uav_fusion.core.estimators.components import (
     scale_packed,
 )
 from uav_fusion.core.estimators.filters import CvFilter, ImmFilter, MotionFilter
-from uav_fusion.core.estimators.kalman import PackedR, expand_upper, pack_r
+from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
+from uav_fusion.core.estimators.kalman import PackedR, expand_cov3, expand_upper, pack_r
 from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
-from uav_fusion.core.estimators.paper import (
+from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.estimators.smoothing import SegmentSmoother
+from uav_fusion.core.estimators.steps import (
     COASTED,
     DISCARDED,
     INITIALISED,
@@ -87,8 +91,7 @@ from uav_fusion.core.estimators.paper import (
     Step,
     nis_gate,
 )
-from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.records import RADAR, RF, RadarFrame, RadarTrack, RfAttempt
+from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
@@ -254,7 +257,19 @@ def object_start(obj: RadarObject, profile: Profile, flat: bool) -> tuple[list[f
 class Tracker:
     """Radar + RF UAV tracker over all radar objects (see the module text)."""
 
-    def __init__(self, profile: Profile, site: Site) -> None:
+    kind = "tracker"
+    fixed_rate = True
+    reads = "frames"
+
+    def __init__(
+        self,
+        profile: Profile,
+        site: Site,
+        grid_hz: float | None = 10.0,
+        t0: float | None = None,
+        t1: float | None = None,
+        smooth: bool = False,
+    ) -> None:
         self.profile = profile
         self.site = site
         self.cfg = profile.score
@@ -298,6 +313,75 @@ class Tracker:
         self.counters: dict[str, int] = {}
         # (x, P, packed bytes, mode probabilities, effective q) of the last step's state
         self._packed: _Packed = (None, None, b"", (), (0.0, 0.0, 0.0))
+        # the estimator interface: fixed-rate output, live fixed-lag smoothing
+        self._args = (grid_hz, t0, t1, smooth)
+        self.grid = StepGrid(profile, grid_hz, t0, t1) if grid_hz is not None else None
+        lag = profile.smoother_lag_s
+        live = smooth and lag is not None and math.isfinite(lag)
+        self.smoother = SegmentSmoother(lag) if live and lag is not None else None
+
+    # --- the estimator interface (uav_fusion.core.estimators.base) ----------------------
+    def radar_frame(self, frame: RadarFrame) -> Outputs:
+        return self._outputs(self.process_radar_frame(frame))
+
+    def rf_attempt(self, attempt: RfAttempt) -> Outputs:
+        return self._outputs(self.process_rf(attempt))
+
+    def advance(self, t: float) -> Outputs:
+        return Outputs(grid=self.grid.advance(t)) if self.grid is not None else Outputs()
+
+    def finish(self) -> Outputs:
+        out = Outputs(grid=self.grid.finish()) if self.grid is not None else Outputs()
+        if self.smoother is not None:
+            out.smoothed = self.smoother.finish()
+        return out
+
+    def restart(self, reason: str) -> None:
+        """A new timeline: a new tracker (the old one's smoothing window is dropped)."""
+        del reason
+        self.__init__(self.profile, self.site, *self._args)  # type: ignore[misc]
+
+    def measurement(self, step: Step) -> tuple[FloatArray, FloatArray | None] | None:
+        z = getattr(step, "z", None)
+        if z is None:
+            return None
+        if step.source == RADAR and len(z) == 3:
+            return np.asarray(z, dtype=float), expand_cov3(self.radar_r.r_at(z[0], z[1], z[2]))
+        return np.asarray(z, dtype=float), None
+
+    def flight_input(self, flight: Flight) -> list[RadarFrame | RfAttempt]:
+        return frames_input(flight, self.profile)
+
+    def status(self) -> dict[str, object]:
+        """The followed radar object, its UAV score and probability, and the time since the
+        last accepted measurement and the last 3D radar update."""
+        best = self.best_track()
+        if best is None:
+            return {"track": "tentative" if self.active else "none"}
+        out: dict[str, object] = {"track": "confirmed"}
+        ref = self.t
+        if best.last_update_t is not None and ref is not None:
+            out["since_last_accepted_s"] = f"{ref - best.last_update_t:.3f}"
+        if ref is not None:
+            last_3d = self.last_3d_t
+            out["since_last_3d_radar_s"] = "-" if last_3d is None else f"{ref - last_3d:.3f}"
+        fol = best.radar_object
+        obj = self.objects.objects.get(fol) if fol is not None else None
+        if obj is not None:
+            score = obj.score(self.cfg)
+            out["followed_radar_track"] = obj.id
+            out["uav_score"] = f"{score:.3f}"
+            out["uav_probability"] = f"{1.0 / (1.0 + math.exp(-max(-30.0, min(30.0, score)))):.3f}"
+        return out
+
+    def _outputs(self, steps: list[TrackerStep]) -> Outputs:
+        out = step_outputs(self.grid, list[Step](steps))
+        sm = self.smoother
+        if sm is not None:
+            for s in steps:
+                if s.counted:
+                    out.smoothed += sm.push(s)
+        return out
 
     # --- fixed-rate accessors -----------------------------------------------------------
     @property
