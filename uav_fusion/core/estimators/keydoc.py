@@ -1,6 +1,7 @@
 """``config/profiles/README.md``, generated from the profile schema (``uav_fusion profile doc``):
-a short hand-written head, then one table per section with every key's type, default, unit,
-the estimators that read it, its basis and its meaning. A test keeps the committed file equal
+a short hand-written head, then one table per section with every key's type, default, value
+in the shipped ``paper`` and ``tracker`` profiles, unit, the estimators that read it, its
+basis and its meaning. A test keeps the committed file equal
 to what this module writes."""
 
 from __future__ import annotations
@@ -8,8 +9,8 @@ from __future__ import annotations
 from dataclasses import MISSING
 from typing import Any
 
-from uav_fusion.core.estimators.keys import ALL, FITTED, MULTI, PAPER, TRACKER, Key
-from uav_fusion.core.estimators.profile import default_of
+from uav_fusion.core.estimators.keys import ALL, FITTED, MATRIX, MULTI, PAPER, TEXT, TRACKER, Key
+from uav_fusion.core.estimators.profile import Profile, default_of, load_profile, value_of
 from uav_fusion.core.estimators.schema import KEYS, SECTIONS
 
 HEAD = """\
@@ -53,7 +54,9 @@ and the key named. Values not given keep the default shown. A sweep
 **Basis** of a value: `spec` (a sensor's specification), `physical` (a physical limit),
 `fitted` (fitted on flights, by the command named; "tune half": compared on the benchmark's
 tune flights) or `design` (a component choice or a design rule). **Used by**: the
-estimators that read the key (the paper's estimator ignores tracker keys).
+estimators that read the key (the paper's estimator ignores tracker keys). The `paper` and
+`tracker` columns give the shipped profiles' values (`tracker_smoothed` is `tracker` with
+`smoother.lag_s: 3`).
 """
 
 GENERATED = (
@@ -97,16 +100,31 @@ def _commands(fit: str) -> str:
     return "; ".join(parts)
 
 
-def _row(key: Key) -> str:
+def _shipped(key: Key, p: Profile) -> str:
+    """The key's value in a shipped profile ("" where that profile's estimator ignores it)."""
+    if not key.attr or (key.kind == TEXT and key.path != "name"):
+        return ""
+    reads = key.used_by == ALL or (key.used_by == PAPER) != p.uses_tracker
+    if not reads:
+        return ""
+    if key.path.startswith("motion.imm.") and p.motion_model != "imm":
+        return ""
+    if key.kind == MATRIX:
+        return "fitted"
+    return f"`{_yaml(value_of(p, key))}`"
+
+
+def _row(key: Key, paper: Profile, tracker: Profile) -> str:
     basis = f"{FITTED}: {_commands(key.fit)}" if key.basis == FITTED and key.fit else key.basis
     meaning = key.meaning + (f"; null: {key.null}" if key.null else "")
-    cells = (f"`{key.path}`", key.what(), _default(key), key.unit, _USED_BY[key.used_by],
-             basis, meaning)
+    cells = (f"`{key.path}`", key.what(), _default(key), _shipped(key, paper),
+             _shipped(key, tracker), key.unit, _USED_BY[key.used_by], basis, meaning)
     return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
 
 
 def readme() -> str:
     """The text of ``config/profiles/README.md``."""
+    paper, tracker = load_profile("paper"), load_profile("tracker")
     out = [HEAD, GENERATED, "", "## Keys"]
     for section, what in SECTIONS.items():
         keys = [k for k in KEYS if k.section == section]
@@ -116,8 +134,8 @@ def readme() -> str:
             continue
         out += [
             "",
-            "| key | value | default | unit | used by | basis | meaning |",
-            "|---|---|---|---|---|---|---|",
-            *(_row(k) for k in keys),
+            "| key | value | default | `paper` | `tracker` | unit | used by | basis | meaning |",
+            "|---|---|---|---|---|---|---|---|---|",
+            *(_row(k, paper, tracker) for k in keys),
         ]
     return "\n".join(out) + "\n"
