@@ -30,7 +30,7 @@ frame, or one RF fix):
   only out to ``range_gate_m`` and horizontally out to ``far_gate_m``, and this baseline has
   no horizontal-only mode; on the multi-UAV tune half, class filter 0.7, a 1000 m gate gave
   55.6 m GOSPA, 1500 m and 2500 m 49.6 m; ``--range-gate-m``), coasted reports
-  (``association.skip_radar_coasts``: velocity and RCS repeating the same radar track's
+  (``association.object.skip_radar_coasts``: velocity and RCS repeating the same radar track's
   previous report) and fixes with a CEP above
   ``rf.max_cep_m`` are dropped, as ours does; no UAV score or classifier: every other radar
   report is a detection (``--radar-min-uav-prob P``: a variant that also drops the reports
@@ -668,7 +668,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--grid-hz must be > 0, got {args.grid_hz}")
     profile = load_profile(args.profile)
     if not profile.uses_tracker:
-        ap.error(f"{profile.name!r} is not a tracker profile (association.mode track_score)")
+        ap.error(f"{profile.name!r} is not a tracker profile (estimator: tracker)")
     site = load_site(args.site)
     rows = [
         compare(

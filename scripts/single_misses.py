@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     definition = load_definition(args.definition)
     profile = load_profile(args.profile)
     if not profile.uses_tracker:
-        ap.error(f"profile {profile.name!r} does not run the tracker (association.mode)")
+        ap.error(f"profile {profile.name!r} does not run the tracker (estimator)")
     settings = ScoreSettings()
     gross_m = settings.gross_error_m
     radar_pos = np.asarray(site.radar.enu, dtype=float)

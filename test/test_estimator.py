@@ -559,7 +559,7 @@ def test_paper_profile() -> None:
         (lambda d: d["track"].update(confirm_m=4, confirm_n=3), "confirm_m"),
         (lambda d: d["track"].update(max_speed_mps=0), "max_speed_mps"),
         (lambda d: d["evaluation"].update(raw_radar_min_mean_uav_prob=2), "raw_radar_min"),
-        (lambda d: d["motion"].update(model="ca"), "not supported"),
+        (lambda d: d["motion"].update(model="ca"), "motion.model must be one of cv, imm"),
         (lambda d: d["track"].update(max_coast=30), "unknown key 'track.max_coast'"),
         (lambda d: d.update(gate=0.9), "unknown key 'gate'"),
     ],

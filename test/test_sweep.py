@@ -41,7 +41,7 @@ def _setup(tmp_path: Path, **changes: object) -> Path:
         "split": "tune",
         "plans": ["zigzag_dash"],
         "profiles": ["paper"],
-        "parameters": {"q": [1.0, 4.0]},
+        "parameters": {"motion.q": [1.0, 4.0]},
     }
     spec.update(changes)
     return _write(tmp_path / "spec.yaml", spec)
@@ -51,14 +51,21 @@ def _setup(tmp_path: Path, **changes: object) -> Path:
     ("changes", "message"),
     [
         ({"parameters": {"qq": [1.0]}}, r"spec.yaml: parameters.qq: unknown parameter"),
+        ({"parameters": {"q": [1.0]}}, r"spec.yaml: parameters.q: unknown parameter .*'q' is at "
+         r"motion.q"),
+        ({"parameters": {"measurement.radar.R": [1.0]}}, r"parameters.measurement.radar.R: "
+         r"unknown parameter"),
         ({"profiles": ["no_such_profile"]}, r"spec.yaml: profiles: unknown profile 'no_such"),
         ({"plans": ["no_such_plan"]}, r"spec.yaml: plans: unknown plan 'no_such_plan'"),
         ({"seeds": [5]}, r"spec.yaml: seeds: seed 5 is not in the tune half"),
         ({"colour": "red"}, r"spec.yaml: unknown key\(s\) colour"),
         ({"split": "train"}, r"spec.yaml: split: one of tune, test expected"),
-        ({"parameters": {"q": "fast"}}, r"spec.yaml: parameters.q: a non-empty list"),
-        ({"parameters": {"nis_probability": [0.9, "high"]}}, r"parameters.nis_probability: a "),
-        ({"parameters": {"q": [-1.0]}}, r"spec.yaml: parameters \{'q': .*motion.q must be"),
+        ({"parameters": {"motion.q": "fast"}}, r"spec.yaml: parameters.motion.q: a non-empty "),
+        ({"parameters": {"gating.nis_probability": [0.9, "high"]}},
+         r"spec.yaml: parameters: gating.nis_probability must be a number in \(0, 1\), got 'high'"),
+        ({"parameters": {"motion.q": [-1.0]}}, r"spec.yaml: parameters: motion.q must be a "),
+        ({"parameters": {"track.confirm_m": [9]}},
+         r"spec.yaml: parameters \{'track.confirm_m': 9\}: .*paper.yaml: track.confirm_m and "),
         ({"metric": "happiness"}, r"spec.yaml: metric: one of"),
     ],
 )
@@ -84,7 +91,7 @@ def test_task_keys_follow_the_inputs(tmp_path: Path) -> None:
     assert len({t.key for t in a}) == 4
     b = sweep_tasks(spec, tmp_path / "cache", SITE_FILE, site)
     assert [t.key for t in a] == [t.key for t in b]  # same inputs, same keys
-    spec2 = load_spec(_setup(tmp_path, parameters={"q": [1.0, 5.0]}))
+    spec2 = load_spec(_setup(tmp_path, parameters={"motion.q": [1.0, 5.0]}))
     c = sweep_tasks(spec2, tmp_path / "cache", SITE_FILE, site)
     assert a[0].key == c[0].key and a[1].key != c[1].key  # only the changed value differs
 
@@ -116,9 +123,9 @@ def test_a_failing_task_is_reported_and_a_rerun_computes_only_what_is_missing(
     assert main(argv) == 1
     text = capsys.readouterr().out
     assert "4 tasks; 2 stored" in text and "2 to run" in text
-    assert text.count("FAILED: paper {'q': ") == 2 and "zigzag_dash-s4" in text
+    assert text.count("FAILED: paper {'motion.q': ") == 2 and "zigzag_dash-s4" in text
     failures = json.loads((out / "failures.json").read_text())
-    assert {(f["flight"], tuple(f["params"]["q"])) for f in failures} == {
+    assert {(f["flight"], tuple(f["params"]["motion.q"])) for f in failures} == {
         ("zigzag_dash-s4", (1.0, 1.0, 1.0)), ("zigzag_dash-s4", (4.0, 4.0, 4.0))}
     assert all("radar" in f["error"] for f in failures)
     with (out / "results.csv").open() as fh:
@@ -140,7 +147,7 @@ def test_a_failing_task_is_reported_and_a_rerun_computes_only_what_is_missing(
             assert json.dumps(row[k]) == json.dumps(again[key][k])  # (NaN == NaN here)
     with (out / "results.csv").open() as fh:
         table = list(csv.DictReader(fh))
-    assert sorted((r["seed"], r["q"]) for r in table) == [
+    assert sorted((r["seed"], r["motion.q"]) for r in table) == [
         ("3", "1 1 1"), ("3", "4 4 4"), ("4", "1 1 1"), ("4", "4 4 4")]
 
 
@@ -178,8 +185,8 @@ def _multi_setup(tmp_path: Path, **changes: object) -> Path:
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        ({"parameters": {"multi.merge_gap": [1.0]}}, r"multi_spec.yaml: parameters: unknown key "
-         r"'multi.merge_gap'"),
+        ({"parameters": {"multi.merge_gap": [1.0]}},
+         r"multi_spec.yaml: parameters.multi.merge_gap: unknown parameter"),
         ({"parameters": {"multi.merge_s": [1.0, -2.0]}},
          r"multi_spec.yaml: parameters: multi.merge_s must be a number >= 0, got -2.0"),
         ({"parameters": {"multi.class_by_age": [1]}}, r"multi.class_by_age must be true or false"),

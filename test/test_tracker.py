@@ -56,7 +56,8 @@ def _imm(**changes: Any) -> dict[str, Any]:
         (lambda d: d["measurement"]["radar"].update(model="lidar"), "measurement.radar.model"),
         (lambda d: d["measurement"]["rf"].update(model="magic"), "measurement.rf.model"),
         (lambda d: d["update"].update(robust="cauchy"), "update.robust"),
-        (lambda d: d["association"].update(mode="nearest"), "association.mode"),
+        (lambda d: d["association"].update(mode="track_score"), "association.mode is no longer"),
+        (lambda d: d.update(estimator="nearest"), "estimator must be one of paper, tracker, multi"),
         (lambda d: d["motion"].update(model="ct"), "motion.model"),
         (
             lambda d: d.update(motion=_imm(transition=[[0.9, 0.2], [0.1, 0.9]])),
@@ -75,16 +76,16 @@ def _imm(**changes: Any) -> dict[str, Any]:
         (lambda d: d["measurement"]["radar"].update(sigma_az_deg=-1.0), "sigma_az_deg"),
         (lambda d: d["measurement"]["radar"].update(sigma_range_m=-0.5), "sigma_range_m"),
         (lambda d: d["measurement"]["rf"].update(floor_m=-2.0), r"measurement\.rf\.floor_m"),
-        (lambda d: d["association"].update(rf_tau_s=-1.0), r"association\.rf_tau_s"),
+        (lambda d: d["association"]["rf"].update(tau_s=-1.0), r"association\.rf\.tau_s"),
         (lambda d: d["association"].update(speed=3), "unknown key 'association.speed'"),
         (lambda d: d.update(smoother={"lag_s": -1.0}), r"smoother\.lag_s"),
         (
-            lambda d: d["association"].update(skip_radar_coasts="yes"),
-            r"association\.skip_radar_coasts must be true or false",
+            lambda d: d["association"]["object"].update(skip_radar_coasts="yes"),
+            r"association\.object\.skip_radar_coasts must be true or false",
         ),
         (
-            lambda d: d["association"].update(rf_nearest_only=1),
-            r"association\.rf_nearest_only must be true or false",
+            lambda d: d["association"]["rf"].update(nearest_only=1),
+            r"association\.rf\.nearest_only must be true or false",
         ),
         (
             lambda d: d["measurement"]["radar"].update(low_el_gain=-1.0),
@@ -92,53 +93,53 @@ def _imm(**changes: Any) -> dict[str, Any]:
         ),
         (
             lambda d: d["measurement"]["radar"].update(low_el_deg=0.0),
-            r"measurement\.radar\.low_el_deg must be > 0",
+            r"measurement\.radar\.low_el_deg must be a number > 0",
         ),
         (
             lambda d: d["gating"].update(range_gate_m=1500.0, far_gate_m=1200.0),
             r"gating\.far_gate_m \(1200\) must exceed gating\.range_gate_m \(1500\)",
         ),
-        (lambda d: d["gating"].update(far_gate_m=-1.0), r"gating\.far_gate_m must be > 0"),
+        (lambda d: d["gating"].update(far_gate_m=-1.0), r"gating\.far_gate_m must be a number > 0"),
         (
-            lambda d: d["association"].update(below_ground_sigmas=-1.0),
-            r"association\.below_ground_sigmas must be >= 0",
+            lambda d: d["association"]["ghost"].update(sigmas=-1.0),
+            r"association\.ghost\.sigmas must be a number >= 0",
         ),
         (
             lambda d: d["measurement"]["radar"].update(az_bias_deg=12.0),
-            r"measurement\.radar\.az_bias_deg must be a finite angle of at most 10 degrees",
+            r"measurement\.radar\.az_bias_deg must be a number in \[-10, 10\], got 12\.0",
         ),
         (
             lambda d: d["measurement"]["radar"].update(el_bias_deg=float("nan")),
-            r"measurement\.radar: 'el_bias_deg' must be finite",
+            r"measurement\.radar\.el_bias_deg must be a number in \[-10, 10\], got nan",
         ),
         (
             lambda d: d["update"].update(notch_sigma_mps=-0.5),
-            r"update\.notch_sigma_mps must be > 0",
+            r"update\.notch_sigma_mps must be a number > 0",
         ),
         (
             lambda d: d["update"].update(notch_after_s=-1.0),
-            r"update\.notch_after_s must be >= 0 or null",
+            r"update\.notch_after_s must be a number >= 0 or null",
         ),
-        (lambda d: d["update"].update(notch_range_m=0.0), r"update\.notch_range_m must be > 0"),
+        (lambda d: d["update"].update(notch_range_m=0.0), r"update\.notch_range_m must be a num"),
         (
-            lambda d: d["association"].update(reach_margin_m=-5.0),
-            r"association\.reach_margin_m must be >= 0",
-        ),
-        (
-            lambda d: d["association"].update(class_min_weight=0.0),
-            r"association\.class_min_weight must be in \(0, 1\]",
+            lambda d: d["association"]["takeover"].update(reach_margin_m=-5.0),
+            r"association\.takeover\.reach_margin_m must be a number >= 0",
         ),
         (
-            lambda d: d["association"].update(class_age_tau_s=0.0),
-            r"association\.class_age_tau_s must be > 0",
+            lambda d: d["association"]["class"].update(min_weight=0.0),
+            r"association\.class\.min_weight must be a number in \(0, 1\]",
         ),
         (
-            lambda d: d["association"].update(class_prior_logit=float("inf")),
-            r"association: 'class_prior_logit' must be finite",
+            lambda d: d["association"]["class"].update(age_tau_s=0.0),
+            r"association\.class\.age_tau_s must be a number > 0",
         ),
         (
-            lambda d: d["association"].update(class_prior_logit="low"),
-            r"association.*class_prior_logit",
+            lambda d: d["association"]["class"].update(prior_logit=float("inf")),
+            r"association\.class\.prior_logit must be a number or null, got inf",
+        ),
+        (
+            lambda d: d["association"]["class"].update(prior_logit="low"),
+            r"association\.class\.prior_logit",
         ),
     ],
 )
@@ -156,7 +157,7 @@ def test_tracker_profiles_load_and_round_trip() -> None:
 
     for name in ("tracker", "tracker_smoothed"):
         p = load_profile(name)
-        assert p.uses_tracker and p.association_mode == "track_score"
+        assert p.uses_tracker and p.estimator == "tracker"
         assert p.motion_model == "cv" and p.radar_model == "polar" and p.rf_model == "cep"
         again = profile_from_dict(p.as_dict())
         assert again.imm_transition == p.imm_transition and again.score == p.score
@@ -1120,7 +1121,7 @@ def test_a_young_uav_track_is_taken_sooner_when_its_class_is_read_for_its_age(
     site: Site,
 ) -> None:
     """The UAV's radar track and a slow bird-like object's both start at the classifier's prior;
-    read for their age (association.class_prior_logit) the UAV's class shows about 2 s
+    read for their age (association.class.prior_logit) the UAV's class shows about 2 s
     sooner, and the other object is never taken either way."""
     decoy_id = 444
     not_uav = _classifier(-0.5)  # a rotor-like non-UAV: never above 0.5

@@ -35,6 +35,8 @@ SITE = load_site()
 LOADERS: dict[str, tuple[Path, Callable[[Path], Any]]] = {
     "site": (CONFIG / "site_lake_wheeler.yaml", load_site),
     "profile": (CONFIG / "profiles" / "paper.yaml", load_profile),
+    "tracker": (CONFIG / "profiles" / "tracker.yaml", load_profile),
+    "tracker_smoothed": (CONFIG / "profiles" / "tracker_smoothed.yaml", load_profile),
     "twin": (CONFIG / "twin_default.yaml", load_twin_config),
     "waypoints": (
         CONFIG / "waypoints" / "lake_wheeler_default.yaml",

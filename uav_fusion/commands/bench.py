@@ -209,8 +209,8 @@ def _run_multi(
     for p in profiles:
         if not p.uses_tracker:
             raise ConfigError(
-                f"{p.source}: the multi-UAV benchmark needs a tracker profile (association.mode "
-                f"track_score); {p.name!r} is not one"
+                f"{p.source}: the multi-UAV benchmark needs a tracker profile (estimator: "
+                f"tracker or multi); {p.name!r} is not one"
             )
     engine = Engine(workers=args.workers, scheduler=args.scheduler, processes=not args.threads)
     settings = definition.settings

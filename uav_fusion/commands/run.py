@@ -96,9 +96,10 @@ def run(args: argparse.Namespace) -> int:
     info = result.info
     if info is not None:
         sel = "" if info.selected_track_id is None else f", track {info.selected_track_id}"
+        how = profile.radar_selection if profile.estimator == "paper" else "every report"
         print(
             f"  radar: {info.radar_reports} reports in {info.radar_frames} frames; "
-            f"{info.radar_selected} to the filter ({profile.association_mode}{sel})"
+            f"{info.radar_selected} to the {profile.estimator} estimator ({how}{sel})"
         )
         print(f"  rf: {info.rf_fixes} fixes of {info.rf_attempts} attempts")
     pc = result.paper_counts()
@@ -150,13 +151,13 @@ def write_targets(flight: Flight, profile: Profile, site: Site, path: str, hz: f
     its multi-target scores against every vehicle's truth."""
     import csv
 
-    from uav_fusion.core.estimators.multi import MultiTracker, run_multi
+    from uav_fusion.core.estimators.base import drive, make_estimator
     from uav_fusion.core.estimators.selection import frames_input
     from uav_fusion.core.scoring.gospa import UavTruth, pool, score_flight
 
     if not profile.uses_tracker:
         raise ConfigError(
-            f"--targets needs a tracker profile (association.mode track_score); "
+            f"--targets needs a tracker profile ('estimator: tracker' or 'multi'); "
             f"{profile.name!r} is not one"
         )
     if not (math.isfinite(hz) and hz > 0):
@@ -170,7 +171,8 @@ def write_targets(flight: Flight, profile: Profile, site: Site, path: str, hz: f
         raise ConfigError("--targets: the flight has neither truth nor measurements")
     t0, t1 = min(ts), max(ts)
     t_run = time.perf_counter()
-    epochs = run_multi(MultiTracker(profile, site), stream, hz, t0, t1)
+    est = make_estimator(profile, site, hz, t0, t1, kind="multi")
+    epochs = drive(est, stream, t1).tracks
     elapsed = time.perf_counter() - t_run
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)

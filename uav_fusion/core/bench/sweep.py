@@ -14,10 +14,11 @@ A sweep spec (YAML, e.g. ``bench/sweep_q.yaml``) names:
 ``profiles``
     estimator profiles (names under ``config/profiles/`` or paths relative to the spec);
 ``parameters``
-    a mapping from a profile parameter (:data:`PARAMETERS`) to the list of values to try;
-    with a multi-UAV definition also ``multi.<key>``, any key of the profile's ``multi``
-    section (:class:`~uav_fusion.core.estimators.multi_settings.MultiSettings`); every
-    combination is run with every profile on every flight;
+    a mapping from a profile key, by its YAML path (``motion.q``, ``gating.nis_probability``,
+    ``association.class.tau_s``; any key of the schema, :mod:`~uav_fusion.core.estimators.
+    schema`, whose value is a number, an integer, true/false, a choice or ``motion.q``), to
+    the list of values to try; ``multi.<key>`` (the multi-UAV tracker's section) needs a
+    multi-UAV definition; every combination is run with every profile on every flight;
 ``metric``
     the figure plotted against each parameter (a
     :class:`~uav_fusion.core.scoring.fixed_rate.GridScore`
@@ -29,10 +30,10 @@ cache (generating it if missing), runs the estimator and scores its fixed-rate o
 benchmark's metrics (:func:`uav_fusion.core.bench.single.score_task`; a multi-UAV definition's
 flights run the multi-UAV tracker and are scored as a set of targets,
 :func:`uav_fusion.core.bench.multi.multi_score_task`, each flight's figures on their own).
-Its result is keyed by a hash of its inputs (the flight's cache key, the profile file's
-bytes, the parameter values and the scoring settings), so a re-run computes only what is
-missing. A task that raises is reported as a failure row with its inputs and does not stop
-the others.
+Its result is keyed by a hash of its inputs (the flight's cache key, the bytes of the profile
+file and of the files it extends, the parameter values and the scoring settings), so a re-run
+computes only what is missing. A task that raises is reported as a failure row with its
+inputs and does not stop the others.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ import json
 import math
 import time
 import traceback
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -62,8 +63,14 @@ from uav_fusion.core.bench.multi import (
 )
 from uav_fusion.core.bench.single import ScoreTask, score_task
 from uav_fusion.core.errors import ConfigError, UavFusionError
-from uav_fusion.core.estimators.multi_settings import check_value
-from uav_fusion.core.estimators.profile import Profile, load_profile, profile_path
+from uav_fusion.core.estimators.keys import BOOL, CHOICE, INTEGER, NUMBER, Q3, check, convert
+from uav_fusion.core.estimators.profile import (
+    Profile,
+    load_profile,
+    profile_files,
+    profile_path,
+)
+from uav_fusion.core.estimators.schema import belongs, find
 from uav_fusion.core.scoring.fixed_rate import GridScore, ScoreSettings, pool
 from uav_fusion.core.site import Site
 from uav_fusion.core.yamlio import read_yaml_file
@@ -80,24 +87,8 @@ _TOP_KEYS = (
     "metric",
 )
 
-#: Profile parameters a sweep may vary: name -> (Profile field, what the value must be).
-#: ``q`` takes one number (the same on the three axes) or a list of three.
-PARAMETERS: dict[str, tuple[str, str]] = {
-    "q": ("q", "a number >= 0 or a list of three"),
-    "nis_probability": ("nis_probability", "a probability in (0, 1)"),
-    "range_gate_m": ("range_gate_m", "a number > 0 or null"),
-    "max_coast_s": ("max_coast_s", "a number > 0 or null"),
-    "max_consecutive_rejections": ("max_consecutive_rejections", "an integer >= 1 or null"),
-    "init_velocity_std_mps": ("init_velocity_std_mps", "a number > 0"),
-    "radar_floor_m": ("radar_floor_m", "a number >= 0"),
-    "radar_sigma_el_deg": ("radar_sigma_el_deg", "a number >= 0"),
-    "radar_low_el_gain": ("radar_low_el_gain", "a number >= 0"),
-    "rf_floor_m": ("rf_floor_m", "a number >= 0"),
-    "rf_cep_scale": ("rf_cep_scale", "a number > 0"),
-    "rf_max_cep_m": ("rf_max_cep_m", "a number > 0 or null"),
-    "robust_dof": ("robust_dof", "a number > 0"),
-    "smoother_lag_s": ("smoother_lag_s", "a number >= 0 or null"),
-}
+#: The kinds of profile key a sweep may vary (numbers, integers, true/false, choices, q).
+SWEEPABLE = (NUMBER, INTEGER, BOOL, CHOICE, Q3)
 
 METRICS = tuple(f.name for f in fields(GridScore) if f.name not in ("flights",))
 #: The figures of a multi-UAV definition's tasks (one flight each).
@@ -135,33 +126,31 @@ class SweepSpec:
         ]
 
 
-def _convert(name: str, value: Any, where: str) -> Any:
-    """Check one parameter value (the profile's own validation follows when it is applied)."""
-    what = PARAMETERS[name][1]
-    bad = ConfigError(f"{where}: {what} expected, got {value!r}")
-    if value is None:
-        if "null" not in what:
-            raise bad
-        return None
-    if name == "q":
-        vals = value if isinstance(value, list) else [value]
-        if len(vals) not in (1, 3):
-            raise bad
-        out = []
-        for v in vals:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise bad
-            out.append(float(v))
-        return tuple(out * 3) if len(out) == 1 else tuple(out)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise bad
-    if not math.isfinite(float(value)):
-        raise bad
-    if "integer" in what:
-        if not float(value).is_integer():
-            raise bad
-        return int(value)
-    return float(value)
+def _parameter(name: str, values: Any, definition: BenchDefinition, src: str) -> tuple[Any, ...]:
+    """A parameter's values, converted and checked by the profile schema (the profile's own
+    rules between keys follow when a combination is applied)."""
+    where = f"{src}: parameters.{name}"
+    key = find(name)
+    if key is None or not key.attr or key.kind not in SWEEPABLE:
+        there = [p for p in belongs(name.rpartition(".")[2]) if p != name]
+        hint = f"; {name!r} is at {' or '.join(there)}" if key is None and there else ""
+        raise ConfigError(
+            f"{where}: unknown parameter (a profile key with a number, an integer, true/false "
+            f"or a choice, by its YAML path such as motion.q or gating.nis_probability{hint})"
+        )
+    if name.startswith(MULTI_PREFIX) and not definition.multi:
+        raise ConfigError(
+            f"{where}: a multi-UAV tracker setting needs a multi-UAV definition "
+            f"({definition.source} has targets: {definition.targets})"
+        )
+    if not isinstance(values, list) or not values:
+        raise ConfigError(f"{where}: a non-empty list of values expected")
+    out = []
+    for v in values:
+        x = convert(key, v, f"{src}: parameters")
+        check(key, x, f"{src}: parameters")
+        out.append(x)
+    return tuple(out)
 
 
 def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
@@ -223,25 +212,7 @@ def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
         raise ConfigError(f"{src}: parameters: a mapping of parameter -> list of values expected")
     params: dict[str, tuple[Any, ...]] = {}
     for name, values in params_raw.items():
-        where = f"{src}: parameters.{name}"
-        multi_key = str(name).startswith(MULTI_PREFIX)
-        if multi_key and not definition.multi:
-            raise ConfigError(
-                f"{where}: a multi-UAV tracker setting needs a multi-UAV definition "
-                f"({definition.source} has targets: {definition.targets})"
-            )
-        if not multi_key and name not in PARAMETERS:
-            raise ConfigError(
-                f"{where}: unknown parameter (allowed: {', '.join(sorted(PARAMETERS))}"
-                + (", multi.<key>)" if definition.multi else ")")
-            )
-        if not isinstance(values, list) or not values:
-            raise ConfigError(f"{where}: a non-empty list of values expected")
-        if multi_key:
-            key = str(name)[len(MULTI_PREFIX):]
-            params[name] = tuple(check_value(key, v, f"{src}: parameters") for v in values)
-        else:
-            params[name] = tuple(_convert(name, v, where) for v in values)
+        params[str(name)] = _parameter(str(name), values, definition, src)
     metrics = MULTI_METRICS if definition.multi else METRICS
     metric = doc.get("metric", "gospa_mean_m" if definition.multi else "err_mean_m")
     if metric not in metrics:
@@ -277,15 +248,7 @@ def load_spec(path: str | Path) -> SweepSpec:
 
 def apply_parameters(profile: Profile, combo: dict[str, Any]) -> Profile:
     """``profile`` with the combination's values (validated by the profile's own rules)."""
-    if not combo:
-        return profile
-    changes: dict[str, Any] = {
-        PARAMETERS[k][0]: v for k, v in combo.items() if not k.startswith(MULTI_PREFIX)
-    }
-    multi = {k[len(MULTI_PREFIX):]: v for k, v in combo.items() if k.startswith(MULTI_PREFIX)}
-    if multi:
-        changes["multi"] = replace(profile.multi, **multi)
-    return profile.with_changes(**changes)
+    return profile.with_keys(combo) if combo else profile
 
 
 @dataclass(frozen=True)
@@ -311,7 +274,8 @@ def task_key(
     """Hash of a task's inputs: what decides its result."""
     h = hashlib.sha256()
     h.update(flight.folder.name.encode())  # plan, seed and the flight's cache key
-    h.update(b"\0profile\0" + profile_file.read_bytes())
+    for f in profile_files(profile_file):  # the file and those it extends
+        h.update(b"\0profile\0" + f.read_bytes())
     h.update(b"\0params\0" + json.dumps(params, sort_keys=True).encode())
     scoring: tuple[object, ...] = (definition.grid_hz, definition.settings)
     if definition.multi:

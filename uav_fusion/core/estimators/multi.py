@@ -5,7 +5,7 @@ profile's motion filter, measurement models, robust weight, NIS gate, deleter an
 confirmation, and the radar object table with its UAV score
 (:mod:`~uav_fusion.core.estimators.objects`), which already follows every radar object.
 The score reads a young radar track's class for its age as the single-UAV tracker does (the
-profile's ``association.class_prior_logit``; ``MultiSettings.class_by_age`` False reads each
+profile's ``association.class.prior_logit``; ``MultiSettings.class_by_age`` False reads each
 report's class as it is; docs/estimator.md, "A young radar track's class"), and, while the
 radar track is young, for its range too (``class_range_scale_m``, ``class_range_age_s``).
 Its own settings (:class:`~uav_fusion.core.estimators.multi_settings.MultiSettings`) are the
@@ -16,7 +16,7 @@ Per radar frame (one time for all reports):
 
 1. every finite report updates its radar object; reports beyond the range gate (or, with
    ``far_gate_m``, beyond the far gate), coasted reports (with
-   ``association.skip_radar_coasts``) and reports of objects scoring below ``follow_min``
+   ``association.object.skip_radar_coasts``) and reports of objects scoring below ``follow_min``
    are not candidates, except for one track: an object scoring at least
    ``emitter_follow_min`` whose last RF credit came from an emitter (its
    :attr:`~uav_fusion.core.estimators.objects.RadarObject.rf_key`, still supported) may

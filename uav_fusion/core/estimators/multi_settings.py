@@ -1,18 +1,15 @@
 """The multi-UAV tracker's own settings: a profile's ``multi`` section.
 
-Kept apart from :mod:`~uav_fusion.core.estimators.multi` so that the profile loader can read and
-check them without importing the tracker. Every key is optional; an absent key keeps the
-default below (the values the benchmark figures were measured with). The meaning of each is
-in :mod:`~uav_fusion.core.estimators.multi` and ``config/profiles/README.md``.
+Kept apart from :mod:`~uav_fusion.core.estimators.multi` so that the profile loader can build
+them without importing the tracker. Every key is optional; an absent key keeps the default
+below (the values the benchmark figures were measured with). Each key's meaning, type and
+bounds are in the profile schema (:mod:`~uav_fusion.core.estimators.schema`, ``multi.*``;
+``config/profiles/README.md``).
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
-from typing import Any
-
-from uav_fusion.core.errors import ConfigError
+from dataclasses import dataclass
 
 
 @dataclass(frozen=True)
@@ -44,91 +41,3 @@ class MultiSettings:
     class_range_age_s: float = 8.0  # than this has its class read for its range too (None: off)
     emitter_follow_min: float | None = 0.0  # an object scoring this much (below follow_min)
     # that its emitter's fixes credit may update the track carrying that emitter (None: off)
-
-
-def multi_keys() -> tuple[str, ...]:
-    """The profile keys of :class:`MultiSettings` (``multi.<key>``)."""
-    return tuple(f.name for f in fields(MultiSettings))
-
-
-# what each key must be: "p" > 0, "nn" >= 0, "unit" in [0, 1]; "?" also allows null
-_RULES: dict[str, str] = {
-    "merge_nis": "p",
-    "merge_s": "nn",
-    "emitter_doubt": "unit",
-    "birth_age_s": "nn?",
-    "continuity_bonus": "nn",
-    "velocity_weight": "nn",
-    "velocity_sigma_mps": "p",
-    "output_coast_s": "nn?",
-    "radar_output_s": "nn?",
-    "emitter_misses": "int?",
-    "birth_sep_m": "nn?",
-    "early_birth_age_s": "nn?",
-    "early_birth_speed_mps": "nn",
-    "emitter_follow_min": "num?",
-    "class_range_scale_m": "p?",
-    "class_range_age_s": "nn",
-}
-_WHAT = {
-    "num": "a number",
-    "p": "a number > 0",
-    "nn": "a number >= 0",
-    "unit": "a number in [0, 1]",
-    "int": "an integer >= 1",
-    "bool": "true or false",
-}
-
-
-def _rule(key: str) -> str:
-    if key in _RULES:
-        return _RULES[key]
-    default = getattr(MultiSettings(), key)
-    if isinstance(default, bool):
-        return "bool"
-    raise AssertionError(f"no rule for MultiSettings.{key}")  # a new field needs a rule
-
-
-def check_value(key: str, value: Any, where: str) -> Any:
-    """One ``multi.<key>`` value, checked and converted; a wrong one stops with ``where``
-    (the file) and the key named."""
-    if key not in multi_keys():
-        raise ConfigError(
-            f"{where}: unknown key 'multi.{key}' (allowed: {', '.join(multi_keys())})"
-        )
-    rule = _rule(key)
-    nullable = rule.endswith("?")
-    kind = rule.rstrip("?")
-    what = _WHAT[kind] + (" or null" if nullable else "")
-    bad = ConfigError(f"{where}: multi.{key} must be {what}, got {value!r}")
-    if value is None:
-        if nullable:
-            return None
-        raise bad
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise bad
-        return value
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise bad
-    if kind == "int":
-        if isinstance(value, float) and not value.is_integer():
-            raise bad
-        if int(value) < 1:
-            raise bad
-        return int(value)
-    x = float(value)
-    if not math.isfinite(x):
-        raise bad
-    if (
-        (kind == "p" and not x > 0.0)
-        or (kind == "nn" and not x >= 0.0)
-        or (kind == "unit" and not 0.0 <= x <= 1.0)
-    ):
-        raise bad
-    return x
-
-
-def multi_settings_from_dict(d: dict[str, Any], where: str) -> MultiSettings:
-    """A profile's ``multi`` section as :class:`MultiSettings` (absent keys: the defaults)."""
-    return MultiSettings(**{k: check_value(k, v, where) for k, v in d.items()})

@@ -70,7 +70,7 @@ its last report that was not a coast, :attr:`RadarObject.kf_t`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from uav_fusion.core.estimators.components import RadarRModel
 from uav_fusion.core.estimators.kalman import CvKalman, PackedR
@@ -81,7 +81,8 @@ RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
 
 @dataclass(frozen=True)
 class ScoreConfig:
-    """Weights and thresholds of the UAV score (``association`` keys of a profile)."""
+    """Weights and thresholds of the UAV score: a profile's ``association`` groups (each key
+    and the field it sets: :mod:`~uav_fusion.core.estimators.schema`)."""
 
     class_weight: float = 1.0
     class_tau_s: float = 8.0
@@ -135,15 +136,6 @@ class ScoreConfig:
     class_range_scale_m: float = 0.0
     class_range_age_s: float = 0.0
 
-
-#: ScoreConfig fields that are not ``association`` keys of a profile.
-_NOT_PROFILE_KEYS = ("class_range_scale_m", "class_range_age_s")
-
-
-
-def score_keys() -> tuple[str, ...]:
-    """The profile keys of :class:`ScoreConfig` (``association.<key>``)."""
-    return tuple(f.name for f in fields(ScoreConfig) if f.name not in _NOT_PROFILE_KEYS)
 
 
 def _ema(old: float, new: float, dt: float, tau: float) -> float:

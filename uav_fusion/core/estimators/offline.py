@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators.base import drive, make_estimator
 from uav_fusion.core.estimators.paper import FusionEstimator
 from uav_fusion.core.estimators.profile import Profile
@@ -168,6 +169,11 @@ def run_flight(flight: Flight, profile: Profile, site: Site) -> RunResult:
     :func:`~uav_fusion.core.estimators.base.make_estimator`) over everything it reads of
     ``flight``, then, with ``smoother.lag_s``, each track segment smoothed over the whole run.
     The fixed-rate output of the steps: :func:`~uav_fusion.core.estimators.grid.grid_from_steps`."""
+    if profile.estimator == "multi":
+        raise ConfigError(
+            f"{profile.source or profile.name}: a multi-UAV profile has no single track to run "
+            "(its tracks: uav_fusion run --targets, or uav_fusion bench --definition multi)"
+        )
     est = make_estimator(profile, site, grid_hz=None)
     steps = drive(est, est.flight_input(flight)).steps
     lag = profile.smoother_lag_s

@@ -299,11 +299,11 @@ class Tracker:
         self.followed: int | None = None  # radar object id of the last radar update
         self.last_3d_t: float | None = None  # time of the last 3D radar update
         self.last_radar_t: float | None = None  # ... of any radar update (3D or horizontal)
-        # the track's horizontal position after its last update (association.reach_margin_m)
+        # the horizontal position after its last update (association.takeover.reach_margin_m)
         self._last_pos = (0.0, 0.0)
         self.consecutive_rejections = 0
         # (object id, since when) of a strong object outside the gate that outscores the
-        # followed one (association.challenge_s)
+        # followed one (association.takeover.challenge_s)
         self._challenger: tuple[int, float] | None = None
         self.segment = -1
         self._mofn: MofN | None = None

@@ -1,0 +1,244 @@
+"""Profiles: the schema, inheritance (``extends``), the generated README, and errors that name
+the file and the key."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from uav_fusion.cli import main
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.estimators.keydoc import readme
+from uav_fusion.core.estimators.keys import BASES, FITTED
+from uav_fusion.core.estimators.multi_settings import MultiSettings
+from uav_fusion.core.estimators.objects import ScoreConfig
+from uav_fusion.core.estimators.profile import (
+    Profile,
+    load_profile,
+    profile_files,
+    profile_from_dict,
+)
+from uav_fusion.core.estimators.schema import KEYS, SECTIONS
+from uav_fusion.resources import config_path
+
+SHIPPED = ("paper", "tracker", "tracker_smoothed")
+# Every attribute of the shipped profiles as loaded before profiles had a schema, groups and
+# extends (commit e0ffabd, the same files as 720647e), ``association: track_score`` read as
+# ``estimator: tracker``.
+FROZEN = json.loads((Path(__file__).parent / "data" / "profiles_e0ffabd.json").read_text())
+
+
+def _plain(v: Any) -> Any:
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return _plain(dataclasses.asdict(v))
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return json.loads(json.dumps(v))
+
+
+def _fields(p: Profile) -> dict[str, Any]:
+    return {f.name: _plain(getattr(p, f.name)) for f in dataclasses.fields(p) if f.name != "source"}
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_profiles_resolve_to_the_values_they_had(name: str) -> None:
+    assert _fields(load_profile(name)) == FROZEN[name]
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_as_dict_round_trips_every_attribute(name: str) -> None:
+    p = load_profile(name)
+    again = profile_from_dict(p.as_dict())
+    assert _fields(again) == _fields(p)
+    assert "extends" not in p.as_dict() and p.as_dict()["estimator"] == p.estimator
+
+
+def test_tracker_smoothed_is_the_tracker_with_a_smoother() -> None:
+    text = config_path("profiles/tracker_smoothed.yaml").read_text()
+    assert len(text.splitlines()) <= 15 and "extends: tracker" in text
+    a, b = _fields(load_profile("tracker")), _fields(load_profile("tracker_smoothed"))
+    assert {k for k in a if a[k] != b[k]} == {"name", "smoother_lag_s"}
+    assert profile_files("tracker_smoothed") == (
+        config_path("profiles/tracker_smoothed.yaml"), config_path("profiles/tracker.yaml"))
+
+
+def test_the_committed_readme_is_the_generated_one(capsys: pytest.CaptureFixture[str]) -> None:
+    committed = config_path("profiles/README.md").read_text(encoding="utf-8")
+    assert committed == readme(), (
+        "config/profiles/README.md is stale: run `uav_fusion profile doc > "
+        "config/profiles/README.md`"
+    )
+    assert main(["profile", "doc"]) == 0
+    assert capsys.readouterr().out == committed
+
+
+def test_profile_show_prints_the_resolved_profile(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["profile", "show", "tracker_smoothed"]) == 0
+    doc = yaml.safe_load(capsys.readouterr().out)
+    assert doc["name"] == "tracker_smoothed" and doc["smoother"] == {"lag_s": 3.0}
+    assert doc["association"]["rf"]["tau_s"] == 15.0 and "extends" not in doc
+
+
+# --- the schema -------------------------------------------------------------------------------
+def test_every_field_has_exactly_one_key() -> None:
+    attrs = [k.attr for k in KEYS if k.attr]
+    assert len(attrs) == len(set(attrs))
+    assert len({k.path for k in KEYS}) == len(KEYS)
+    want = {f.name for f in dataclasses.fields(Profile)} - {"source", "score", "multi"}
+    want |= {f"score.{f.name}" for f in dataclasses.fields(ScoreConfig)} - {
+        "score.class_range_scale_m", "score.class_range_age_s"}  # set by MultiSettings
+    want |= {f"multi.{f.name}" for f in dataclasses.fields(MultiSettings)}
+    assert set(attrs) == want
+
+
+def test_every_key_is_documented() -> None:
+    for k in KEYS:
+        assert k.basis in BASES, k.path
+        assert k.meaning and "\n" not in k.meaning, k.path
+        assert k.basis != FITTED or k.fit, f"{k.path}: a fitted value names its command"
+        assert k.section in SECTIONS, k.path
+    assert len([k for k in KEYS if k.section.startswith("association.")]) >= 30
+    groups = {k.section for k in KEYS if k.section.startswith("association.")}
+    assert len(groups) >= 8 and all(k.section != "association" for k in KEYS)
+
+
+# --- extends --------------------------------------------------------------------------------
+def _write(path: Path, doc: object) -> Path:
+    path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+    return path
+
+
+def test_extends_merges_mappings_and_replaces_lists_and_values(tmp_path: Path) -> None:
+    base = _write(tmp_path / "base.yaml", {
+        "extends": "tracker",
+        "name": "base",
+        "track": {"init_sources": ["radar"], "max_coast_s": 30.0},
+        "association": {"rf": {"tau_s": 20.0}},
+    })
+    child = _write(tmp_path / "child.yaml", {
+        "extends": "base.yaml",  # a path: relative to this file
+        "track": {"tentative_sources": None, "max_consecutive_rejections": None},
+        "multi": {"emitter_misses": None},
+        "association": {"rf": {"memory_s": 10.0}},
+    })
+    tracker, p = load_profile("tracker"), load_profile(child)
+    assert p.name == "child"  # the name is the file's own
+    assert p.init_sources == ("radar",) and p.max_coast_s == 30.0  # from base, two deep
+    assert p.tentative_sources == () and p.max_consecutive_rejections is None  # null sets null
+    assert p.multi.emitter_misses is None and p.multi.merge_s == tracker.multi.merge_s
+    assert (p.score.rf_tau_s, p.score.rf_memory_s) == (20.0, 10.0)  # merged key by key
+    assert p.score.follow_min == tracker.score.follow_min and p.estimator == "tracker"
+    assert profile_files(child) == (child, base, config_path("profiles/tracker.yaml"))
+
+
+def test_a_value_inherited_from_a_parent_is_blamed_on_the_parent(tmp_path: Path) -> None:
+    parent = _write(tmp_path / "parent.yaml", {"extends": "tracker", "update": {"dof": -1.0}})
+    child = _write(tmp_path / "child.yaml", {"extends": "./parent.yaml", "name": "c"})
+    with pytest.raises(ConfigError, match=f"^{parent}: update.dof must be a number > 0"):
+        load_profile(child)
+
+
+@pytest.mark.parametrize(
+    ("docs", "message"),
+    [
+        ({"a": {"extends": "b.yaml"}, "b": {"extends": "./a.yaml"}},
+         r"b.yaml: extends './a.yaml' makes a cycle: .*a.yaml -> .*b.yaml -> .*a.yaml"),
+        ({"a": {"extends": "a.yaml"}}, r"a.yaml: extends 'a.yaml' makes a cycle"),
+        ({"a": {"extends": "missing.yaml"}}, r"a.yaml: extends 'missing.yaml': no profile file "
+         r".*missing.yaml"),
+        ({"a": {"extends": "no_such_profile"}}, r"a.yaml: extends 'no_such_profile': no profile "
+         r"file .*config/profiles/no_such_profile.yaml"),
+        ({"a": {"extends": ["tracker"]}}, r"a.yaml: extends must be a profile name or a path"),
+        ({"a": {"extends": "b.yaml"}, "b": {"extends": "tracker", "gate": 3}},
+         r"b.yaml: unknown key 'gate'"),
+    ],
+)
+def test_extends_errors_name_the_files(
+    tmp_path: Path, docs: dict[str, object], message: str
+) -> None:
+    for stem, doc in docs.items():
+        _write(tmp_path / f"{stem}.yaml", doc)
+    with pytest.raises(ConfigError, match=message):
+        load_profile(tmp_path / "a.yaml")
+
+
+# --- bad keys and values -------------------------------------------------------------------
+def _tracker_doc() -> dict[str, Any]:
+    return dict(yaml.safe_load(config_path("profiles/tracker.yaml").read_text()))
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        # unknown
+        (lambda d: d["association"]["rf"].update(tau=3.0),
+         r"unknown key 'association\.rf\.tau' \(allowed: weight, tau_s, max, window_s, "),
+        (lambda d: d.update(colour="red"), r"unknown key 'colour' \(allowed: name, "),
+        (lambda d: d["association"].update(cars={"weight": 1.0}), r"unknown key 'association\."
+         r"cars'"),
+        # misplaced: a known key in the wrong section, or under its old flat name
+        (lambda d: d["gating"].update(max_coast_s=9.0),
+         r"unknown key 'gating\.max_coast_s': it belongs at track\.max_coast_s"),
+        (lambda d: d["association"].update(rf_tau_s=9.0),
+         r"unknown key 'association\.rf_tau_s': it belongs at association\.rf\.tau_s"),
+        (lambda d: d["association"]["class"].update(challenge_s=2.0),
+         r"'association\.class\.challenge_s': it belongs at association\.takeover\.challenge_s"),
+        (lambda d: d.update(imm={}), r"unknown key 'imm': it belongs at motion\.imm"),
+        (lambda d: d["association"].update(mode="track_score"),
+         r"association\.mode is no longer a key: .*'estimator: paper \| tracker \| multi'"),
+        # bad values
+        (lambda d: d["association"]["class"].update(tau_s="slow"),
+         r"association\.class\.tau_s must be a number >= 0, got 'slow'"),
+        (lambda d: d["multi"].update(merge_s=-1), r"multi\.merge_s must be a number >= 0, got -1"),
+        (lambda d: d["track"].update(confirm_n=2.5), r"track\.confirm_n must be an integer >= 1"),
+        (lambda d: d["association"].update(rf=[1, 2]), r"'association\.rf' must be a mapping"),
+        (lambda d: d.update(estimator="kalman"), r"estimator must be one of paper, tracker, multi"),
+        # rules between keys
+        (lambda d: d.update(radar_selection="online"),
+         r"radar_selection and 'estimator: tracker' exclude each other"),
+        (lambda d: d.update(estimator="paper"),
+         r"association\.class\.tau_s needs 'estimator: tracker' or 'multi'"),
+        (lambda d: (d.update(estimator="paper"), d.pop("association")),
+         r"gating\.far_gate_m needs 'estimator: tracker' or 'multi'"),
+    ],
+)
+def test_bad_profiles_name_the_file_and_the_key(
+    tmp_path: Path, edit: Any, message: str
+) -> None:
+    doc = _tracker_doc()
+    edit(doc)
+    f = _write(tmp_path / "bad.yaml", doc)
+    with pytest.raises(ConfigError, match=message) as exc:
+        load_profile(f)
+    assert str(exc.value).startswith(f"{f}: ")
+
+
+def test_a_profile_without_estimator_is_the_papers() -> None:
+    doc = load_profile("paper").as_dict()
+    del doc["estimator"]
+    p = profile_from_dict(doc)
+    assert p.estimator == "paper" and not p.uses_tracker and p.radar_selection == "largest_track"
+
+
+def test_estimator_multi_is_a_tracker_profile(tmp_path: Path) -> None:
+    f = _write(tmp_path / "m.yaml", {"extends": "tracker", "estimator": "multi"})
+    p = load_profile(f)
+    assert p.estimator == "multi" and p.uses_tracker and p.radar_selection == "online"
+    assert profile_from_dict(p.as_dict()).estimator == "multi"
+
+
+def test_with_keys_sets_keys_by_path_and_checks_them() -> None:
+    p = load_profile("tracker")
+    q = p.with_keys({"association.class.tau_s": 5.0, "multi.merge_s": 2.0, "motion.q": (1.0,) * 3})
+    assert (q.score.class_tau_s, q.multi.merge_s, q.q) == (5.0, 2.0, (1.0, 1.0, 1.0))
+    assert q.score.follow_min == p.score.follow_min and p.score.class_tau_s == 3.0
+    with pytest.raises(ConfigError, match=r"association\.class\.min_weight must be a number in"):
+        p.with_keys({"association.class.min_weight": 0.0})
+    with pytest.raises(ConfigError, match=r"unknown key 'association\.class_tau_s'"):
+        p.with_keys({"association.class_tau_s": 5.0})

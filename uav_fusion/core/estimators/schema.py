@@ -1,0 +1,433 @@
+"""Every key of an estimator profile, documented once: its YAML path, type, bounds or choices,
+unit, meaning and basis.
+
+The loader (:mod:`~uav_fusion.core.estimators.profile`) reads and checks a profile with this
+table, ``config/profiles/README.md`` is generated from it (``uav_fusion profile doc``), and a
+sweep's parameters are its paths. Defaults are not written here: they are those of the
+dataclasses the keys land in (:class:`~uav_fusion.core.estimators.profile.Profile`,
+:class:`~uav_fusion.core.estimators.objects.ScoreConfig` for ``association.*`` and
+:class:`~uav_fusion.core.estimators.multi_settings.MultiSettings` for ``multi.*``).
+
+A key's *basis* says where its value comes from: ``spec`` (a sensor's specification),
+``physical`` (a physical limit), ``fitted`` (fitted on flights, by the command named in
+``fit``) or ``design`` (a component choice or a design rule).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from uav_fusion.core.estimators.keys import (
+    ALL,
+    BOOL,
+    CHOICE,
+    DESIGN,
+    ESTIMATORS,
+    FITTED,
+    INTEGER,
+    MATRIX,
+    MULTI,
+    NUMBER,
+    PAPER,
+    PHYSICAL,
+    PROBS,
+    Q3,
+    Q3_LIST,
+    ROWS,
+    SOURCE_LIST,
+    SPEC,
+    TEXT,
+    TRACKER,
+    Key,
+)
+from uav_fusion.core.records import RADAR, RF
+
+TUNED = "uav_fusion sweep (tune half)"
+CALIBRATE = "uav_fusion calibrate (errors against truth, tune flights)"
+
+
+def _k(path: str, attr: str, kind: str, basis: str, meaning: str, **kw: Any) -> Key:
+    return Key(path, attr, kind, basis, meaning, **kw)
+
+
+def _group(prefix: str, used_by: str, *keys: Key) -> tuple[Key, ...]:
+    """Keys of one section (their paths given relative to it), read by ``used_by`` unless a
+    key says otherwise."""
+    return tuple(
+        Key(**{
+            **k.__dict__,
+            "path": f"{prefix}.{k.path}",
+            "used_by": used_by if k.used_by == ALL else k.used_by,
+        })
+        for k in keys
+    )
+
+
+def _s(name: str, field: str, kind: str, basis: str, meaning: str, **kw: Any) -> Key:
+    """An ``association`` key (a :class:`ScoreConfig` field)."""
+    return Key(name, f"score.{field}", kind, basis, meaning, **kw)
+
+
+def _m(name: str, kind: str, basis: str, meaning: str, **kw: Any) -> Key:
+    """A ``multi`` key (a :class:`MultiSettings` field of the same name)."""
+    return Key(name, f"multi.{name}", kind, basis, meaning, **kw)
+
+
+#: Each section's one-line description (a section is a mapping of keys).
+SECTIONS: dict[str, str] = {
+    "": "the profile itself",
+    "motion": "the motion model of the fused track",
+    "motion.imm": "the IMM's modes (motion.model: imm)",
+    "measurement": "the sensors' measurement models",
+    "measurement.radar": "the radar's measurement model",
+    "measurement.rf": "the RF fixes' measurement model",
+    "gating": "which radar reports may update the track",
+    "sources": "which sensors are used at all",
+    "track": "track start, confirmation and deletion",
+    "update": "the Kalman update's robust weight and pseudo-measurements",
+    "association": "the UAV score of every radar object, by cue (core/estimators/objects.py)",
+    "association.class": "the radar classifier's output, read over time",
+    "association.stationary": "clutter: an object that stands still",
+    "association.vehicle": "a ground vehicle: moving, low, never clearly in the air",
+    "association.ghost": "a multipath ghost: clearly below the ground",
+    "association.bird": "a bird: erratic motion with a small RCS",
+    "association.size": "too large a radar target for a small UAV",
+    "association.rf": "support from RF fixes at the object's position",
+    "association.fused": "agreement with the fused track",
+    "association.age": "a track that persists is more likely real",
+    "association.object": "each radar object's own filter and the radar's coasts",
+    "association.thresholds": "the scores that let an object update or start a track",
+    "association.takeover": "single-UAV tracker: when another object takes the track over",
+    "smoother": "smoothing of the tracker's estimates",
+    "multi": "the multi-UAV tracker's own rules",
+    "evaluation": "evaluation settings that do not change the filter",
+}
+
+_TOP = (
+    _k("name", "name", TEXT, DESIGN, "label in tables, outputs and topics"),
+    _k("description", "description", TEXT, DESIGN, "free text"),
+    _k("extends", "", TEXT, DESIGN, "a profile name or a path (relative to this file) whose keys "
+       "this file starts from; mappings merge key by key, lists and values replace", null="none"),
+    _k("estimator", "estimator", CHOICE, DESIGN, "paper: the paper's filter on one radar track; "
+       "tracker: every radar object scored, one UAV track; multi: one track per UAV",
+       choices=ESTIMATORS),
+    _k("radar_selection", "radar_selection", CHOICE, DESIGN, "largest_track: only the radar "
+       "track id with most reports; online: every report of a frame is a candidate",
+       choices=("largest_track", "online"), used_by=PAPER),
+)
+_MOTION = (
+    _k("motion.model", "motion_model", CHOICE, DESIGN, "cv: one constant-velocity model "
+       "(motion.q); imm: an IMM of CV modes (motion.imm)", choices=("cv", "imm"), used_by=TRACKER),
+    _k("motion.q", "q", Q3, FITTED, "white-acceleration spectral density per axis; Q = q "
+       "[[T^3/3, T^2/2], [T^2/2, T]]", unit="m^2/s^3", bounds=">= 0",
+       fit=f"uav_fusion estimate-r (suggests it); {TUNED}"),
+    *_group("motion.imm", TRACKER,
+        _k("q", "imm_q", Q3_LIST, DESIGN, "one q per IMM mode", unit="m^2/s^3", bounds=">= 0"),
+        _k("transition", "imm_transition", ROWS, DESIGN, "Markov matrix applied once per "
+           "prediction (row i: from mode i)"),
+        _k("initial", "imm_initial", PROBS, DESIGN, "mode probabilities of a new track"),
+    ),
+)
+_MEASUREMENT = (
+    _k("measurement.note", "r_note", TEXT, FITTED, "where R came from",
+       fit="uav_fusion estimate-r --write-profile"),
+    _k("measurement.radar.R", "r_radar", MATRIX, FITTED, "radar covariance (east, north, up); "
+       "with model polar only for reports without a polar R", unit="m^2", size=3,
+       fit="uav_fusion estimate-r --write-profile"),
+    *_group("measurement.radar", TRACKER,
+        _k("model", "radar_model", CHOICE, DESIGN, "fixed: R for every report; polar: R from "
+           "polar errors at the report's position (grows with range)",
+           choices=("fixed", "polar")),
+        _k("sigma_range_m", "radar_sigma_range_m", NUMBER, FITTED, "polar model: range "
+           "standard deviation", unit="m", bounds=">= 0", fit=CALIBRATE),
+        _k("sigma_az_deg", "radar_sigma_az_deg", NUMBER, FITTED, "polar model: azimuth "
+           "standard deviation", unit="deg", bounds=">= 0", fit=CALIBRATE),
+        _k("sigma_el_deg", "radar_sigma_el_deg", NUMBER, FITTED, "polar model: elevation "
+           "standard deviation (above the per-report value: errors correlate over seconds)",
+           unit="deg", bounds=">= 0", fit=f"{CALIBRATE}; {TUNED}"),
+        _k("floor_m", "radar_floor_m", NUMBER, FITTED, "polar model: standard deviation added "
+           "on each axis (successive reports' errors are correlated)", unit="m",
+           bounds=">= 0", fit=TUNED),
+        _k("low_el_gain", "radar_low_el_gain", NUMBER, FITTED, "ground multipath: the "
+           "elevation sigma is multiplied by 1 + low_el_gain exp(-el / low_el_deg)",
+           bounds=">= 0", fit=TUNED),
+        _k("low_el_deg", "radar_low_el_deg", NUMBER, PHYSICAL, "the elevation scale of the "
+           "ground-multipath term", unit="deg", bounds="> 0"),
+        _k("az_bias_deg", "radar_az_bias_deg", NUMBER, FITTED, "mounting misalignment: every "
+           "report is turned back by this in azimuth (clockwise from north)", unit="deg",
+           bounds="[-10, 10]", fit="uav_fusion calibrate F1 F2 ..."),
+        _k("el_bias_deg", "radar_el_bias_deg", NUMBER, FITTED, "mounting misalignment: every "
+           "report is lowered by this in elevation", unit="deg", bounds="[-10, 10]",
+           fit="uav_fusion calibrate F1 F2 ..."),
+    ),
+    _k("measurement.rf.R", "r_rf", MATRIX, FITTED, "RF covariance (east, north); with model "
+       "cep only for fixes without a CEP", unit="m^2", size=2,
+       fit="uav_fusion estimate-r --write-profile"),
+    *_group("measurement.rf", TRACKER,
+        _k("model", "rf_model", CHOICE, DESIGN, "fixed: R for every fix; cep: sigma = max("
+           "floor_m, cep_scale CEP / 1.1774) (ref_sensors / valid_sensors)^sensor_exponent",
+           choices=("fixed", "cep")),
+        _k("cep_scale", "rf_cep_scale", NUMBER, FITTED, "cep model: the fix's CEP is scaled "
+           "by this", bounds="> 0", fit=CALIBRATE),
+        _k("floor_m", "rf_floor_m", NUMBER, FITTED, "cep model: smallest sigma per axis",
+           unit="m", bounds=">= 0", fit=CALIBRATE),
+        _k("ref_sensors", "rf_ref_sensors", INTEGER, SPEC, "cep model: the sensor count a CEP "
+           "refers to", bounds=">= 1"),
+        _k("sensor_exponent", "rf_sensor_exponent", NUMBER, FITTED, "cep model: how much "
+           "fewer valid sensors widen the sigma", fit=CALIBRATE),
+        _k("max_cep_m", "rf_max_cep_m", NUMBER, FITTED, "fixes with a larger CEP are discarded "
+           "(mostly non-line-of-sight)", unit="m", bounds="> 0", null="none discarded",
+           fit=CALIBRATE),
+    ),
+)
+_GATING = _group(
+    "gating", ALL,
+    _k("range_gate_m", "range_gate_m", NUMBER, DESIGN, "radar reports farther from the radar "
+       "are discarded (trackers: updated in 3D out to here)", unit="m", bounds="> 0",
+       null="the site's radar.range_gate_m"),
+    _k("nis_probability", "nis_probability", NUMBER, DESIGN, "chi-square probability of the "
+       "NIS gate", bounds="(0, 1)"),
+    _k("min_uav_prob", "min_uav_prob", NUMBER, DESIGN, "radar reports with a lower (or no) UAV "
+       "class probability are discarded", bounds="[0, 1]", null="no threshold"),
+    _k("far_gate_m", "far_gate_m", NUMBER, FITTED, "radar reports between range_gate_m "
+       "and this update a confirmed track horizontally only; must exceed range_gate_m",
+       unit="m", bounds="> 0", null="off", fit=TUNED, used_by=TRACKER),
+)
+_SOURCES = _group(
+    "sources", ALL,
+    _k(RADAR, "use_radar", BOOL, DESIGN, "use the radar at all"),
+    _k(RF, "use_rf", BOOL, DESIGN, "use the RF fixes at all"),
+)
+_TRACK = _group(
+    "track", ALL,
+    _k("init_sources", "init_sources", SOURCE_LIST, DESIGN, "sources whose measurement may "
+       "start a track"),
+    _k("init_velocity_std_mps", "init_velocity_std_mps", NUMBER, PHYSICAL, "velocity "
+       "standard deviation of a new track, per axis", unit="m/s", bounds="> 0"),
+    _k("rf_init_altitude_m", "rf_init_altitude_m", NUMBER, PHYSICAL, "ENU up given to a track "
+       "started from a 2D RF fix", unit="m"),
+    _k("rf_init_altitude_std_m", "rf_init_altitude_std_m", NUMBER, PHYSICAL, "its standard "
+       "deviation", unit="m", bounds="> 0"),
+    _k("tentative_sources", "tentative_sources", SOURCE_LIST, DESIGN, "sources whose tracks "
+       "start tentative (not published) until confirm_m of confirm_n hits", null="none"),
+    _k("confirm_m", "confirm_m", INTEGER, DESIGN, "hits that confirm a tentative track ...",
+       bounds=">= 1"),
+    _k("confirm_n", "confirm_n", INTEGER, DESIGN, "... among its first confirm_n "
+       "measurements (the start included); needs confirm_m <= confirm_n", bounds=">= 1"),
+    _k("max_speed_mps", "max_speed_mps", NUMBER, PHYSICAL, "a hit of a tentative track lies "
+       "at most this far from the last hit per second (a small UAV's top speed)",
+       unit="m/s", bounds="> 0", null="no bound"),
+    _k("max_consecutive_rejections", "max_consecutive_rejections", INTEGER, DESIGN, "the track "
+       "restarts after this many NIS rejections in a row", bounds=">= 1", null="never"),
+    _k("max_coast_s", "max_coast_s", NUMBER, DESIGN, "the track restarts when nothing was "
+       "accepted for this long (a few RF intervals)", unit="s", bounds="> 0", null="never"),
+)
+_UPDATE = _group(
+    "update", TRACKER,
+    _k("robust", "robust", CHOICE, DESIGN, "the update uses R / w: none (w = 1), student_t (w = "
+       "(dof + m) / (dof + NIS)) or huber (w = min(1, huber_k / sqrt(NIS)))",
+       choices=("none", "student_t", "huber")),
+    _k("dof", "robust_dof", NUMBER, DESIGN, "student_t: degrees of freedom", bounds="> 0"),
+    _k("huber_k", "robust_huber_k", NUMBER, DESIGN, "huber: threshold", bounds="> 0"),
+    _k("vz_hold_after_s", "vz_hold_after_s", NUMBER, DESIGN, "without a radar update for this "
+       "long, each RF fix first applies vz = 0 (2D fixes cannot see the climb rate)", unit="s",
+       bounds=">= 0", null="never"),
+    _k("vz_hold_sigma_mps", "vz_hold_sigma_mps", NUMBER, DESIGN, "standard deviation of that "
+       "pseudo-measurement", unit="m/s", bounds="> 0"),
+    _k("notch_after_s", "notch_after_s", NUMBER, DESIGN, "single-UAV tracker: without a radar "
+       "update for this long within notch_range_m, each radar frame applies radial speed = 0 "
+       "(a hover in the Doppler notch)", unit="s", bounds=">= 0", null="never"),
+    _k("notch_sigma_mps", "notch_sigma_mps", NUMBER, DESIGN, "standard deviation of that "
+       "pseudo-measurement", unit="m/s", bounds="> 0"),
+    _k("notch_range_m", "notch_range_m", NUMBER, SPEC, "range within which the radar would see "
+       "a UAV that is not in its notch", unit="m", bounds="> 0"),
+)
+_ASSOCIATION = (
+    *_group("association.class", TRACKER,
+        _s("weight", "class_weight", NUMBER, DESIGN, "weight of the class history (moving "
+           "average of the UAV class logit)", bounds=">= 0"),
+        _s("tau_s", "class_tau_s", NUMBER, FITTED, "time constant of that average", unit="s",
+           bounds=">= 0", fit=TUNED),
+        _s("clip", "class_clip", NUMBER, DESIGN, "each logit is clipped to +-clip",
+           bounds=">= 0"),
+        _s("prior_logit", "class_prior_logit", NUMBER, FITTED, "a young radar track's class "
+           "output starts at this prior: a report at age a counts as prior + (logit - prior) / "
+           "max(min_weight, 1 - exp(-a / age_tau_s))", null="every logit as it is", fit=TUNED),
+        _s("age_tau_s", "class_age_tau_s", NUMBER, FITTED, "how fast the classifier's output "
+           "leaves its prior", unit="s", bounds="> 0", fit=TUNED),
+        _s("min_weight", "class_min_weight", NUMBER, FITTED, "smallest weight of a young "
+           "report's class", bounds="(0, 1]", fit=TUNED),
+    ),
+    *_group("association.stationary", TRACKER,
+        _s("speed_mps", "stationary_speed_mps", NUMBER, PHYSICAL, "an object whose mean speed "
+           "stays below this ...", unit="m/s", bounds=">= 0"),
+        _s("min_age_s", "stationary_min_age_s", NUMBER, DESIGN, "... once older than this ...",
+           unit="s", bounds=">= 0"),
+        _s("weight", "stationary_weight", NUMBER, DESIGN, "... loses this much",
+           bounds=">= 0"),
+    ),
+    *_group("association.vehicle", TRACKER,
+        _s("ground_alt_m", "ground_alt_m", NUMBER, PHYSICAL, "an object moving below this "
+           "height ...", unit="m", bounds=">= 0"),
+        _s("weight", "ground_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
+        _s("release_sigmas", "ground_release_sigmas", NUMBER, FITTED, "... unless its mean "
+           "height once stood this many vertical sigmas above ground_alt_m", bounds=">= 0",
+           fit=TUNED),
+        _s("min_rcs_dbsm", "vehicle_min_rcs_dbsm", NUMBER, PHYSICAL, "... and only with a mean "
+           "RCS of at least this (a car is a large target; -100: any)", unit="dBsm"),
+    ),
+    *_group("association.ghost", TRACKER,
+        _s("below_ground_m", "below_ground_m", NUMBER, PHYSICAL, "an object whose mean height "
+           "lies more than this below the ground ...", unit="m", bounds=">= 0"),
+        _s("sigmas", "below_ground_sigmas", NUMBER, FITTED, "... and more than this many of "
+           "its reports' vertical sigmas ...", bounds=">= 0", fit=TUNED),
+        _s("weight", "below_ground_weight", NUMBER, DESIGN, "... loses this much",
+           bounds=">= 0"),
+    ),
+    *_group("association.bird", TRACKER,
+        _s("erratic_nis", "erratic_nis", NUMBER, DESIGN, "an object whose own filter's mean "
+           "NIS exceeds this ...", bounds=">= 0"),
+        _s("max_rcs_dbsm", "bird_rcs_dbsm", NUMBER, PHYSICAL, "... with a mean RCS below this "
+           "...", unit="dBsm"),
+        _s("weight", "erratic_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
+    ),
+    *_group("association.size", TRACKER,
+        _s("large_rcs_dbsm", "large_rcs_dbsm", NUMBER, PHYSICAL, "an object whose mean RCS is "
+           "at least this (100: off) ...", unit="dBsm"),
+        _s("weight", "large_rcs_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
+    ),
+    *_group("association.rf", TRACKER,
+        _s("weight", "rf_weight", NUMBER, DESIGN, "weight of the RF support (fixes inside the "
+           "object's 99 % gate)", bounds=">= 0"),
+        _s("tau_s", "rf_tau_s", NUMBER, FITTED, "the support decays with this time constant",
+           unit="s", bounds=">= 0", fit=TUNED),
+        _s("max", "rf_max", NUMBER, DESIGN, "the support is capped at this", bounds=">= 0"),
+        _s("window_s", "rf_window_s", NUMBER, DESIGN, "a fix credits objects with a report "
+           "this recent", unit="s", bounds=">= 0"),
+        _s("nearest_only", "rf_nearest_only", BOOL, FITTED, "a fix credits only the object "
+           "it fits best", fit=TUNED),
+        _s("support_max_cep_m", "rf_support_max_cep_m", NUMBER, FITTED, "single-UAV tracker: "
+           "a fix discarded for its CEP still credits when its CEP is at most this (0: never)",
+           unit="m", bounds=">= 0", fit=TUNED),
+        _s("memory_s", "rf_memory_s", NUMBER, DESIGN, "a fix that credits no object is kept "
+           "this long for a new object in its gate (0: not kept)", unit="s", bounds=">= 0"),
+    ),
+    *_group("association.fused", TRACKER,
+        _s("weight", "fused_weight", NUMBER, DESIGN, "weight of the agreement with the fused "
+           "track", bounds=">= 0"),
+        _s("tau_s", "fused_tau_s", NUMBER, DESIGN, "time constant of its moving average",
+           unit="s", bounds=">= 0"),
+        _s("nis", "fused_nis", NUMBER, DESIGN, "a report agrees at an NIS of at most this",
+           bounds=">= 0"),
+        _s("lost_sigma_m", "lost_sigma_m", NUMBER, FITTED, "single-UAV tracker: no agreement "
+           "is recorded while the track's horizontal sigma exceeds this (0: off)", unit="m",
+           bounds=">= 0", fit=TUNED),
+    ),
+    *_group("association.age", TRACKER,
+        _s("weight", "age_weight", NUMBER, DESIGN, "weight of the age term", bounds=">= 0"),
+        _s("full_s", "age_full_s", NUMBER, FITTED, "the age term is full from this age",
+           unit="s", bounds=">= 0", fit=TUNED),
+    ),
+    *_group("association.object", TRACKER,
+        _s("q", "object_q", NUMBER, DESIGN, "process noise of each object's CV filter",
+           unit="m^2/s^3", bounds=">= 0"),
+        _s("floor_m", "object_floor_m", NUMBER, DESIGN, "its polar R's floor (the track's "
+           "floor would hide erratic motion)", unit="m", bounds=">= 0"),
+        _s("speed_tau_s", "speed_tau_s", NUMBER, DESIGN, "time constant of the objects' "
+           "moving averages of speed, height and RCS", unit="s", bounds=">= 0"),
+        _s("skip_radar_coasts", "skip_radar_coasts", BOOL, FITTED, "a report repeating its "
+           "radar track's velocity and RCS (a coast) updates neither the track nor the object",
+           fit=TUNED),
+    ),
+    *_group("association.thresholds", TRACKER,
+        _s("follow_min", "follow_min", NUMBER, FITTED, "objects scoring at least this may "
+           "update a confirmed track", fit=TUNED),
+        _s("init_min", "init_min", NUMBER, DESIGN, "an object scoring at least this ...", ),
+        _s("init_min_reports", "init_min_reports", INTEGER, DESIGN, "... with this many "
+           "reports may start a track", bounds=">= 0"),
+    ),
+    *_group("association.takeover", TRACKER,
+        _s("challenge_s", "challenge_s", NUMBER, FITTED, "a strong object outside the gate "
+           "that outscores the followed one for this long takes the track over (0: never)",
+           unit="s", bounds=">= 0", fit=TUNED),
+        _s("challenge_margin", "challenge_margin", NUMBER, FITTED, "... by this margin",
+           bounds=">= 0", fit=TUNED),
+        _s("reach_margin_m", "reach_margin_m", NUMBER, FITTED, "another object's report is "
+           "outside the gate beyond track.max_speed_mps x time since the last update + this "
+           "(0: off)", unit="m", bounds=">= 0", fit=TUNED),
+    ),
+)
+_MULTI = _group(
+    "multi", MULTI,
+    _m("merge_nis", NUMBER, DESIGN, "two confirmed tracks closer than this (NIS, 3 dof) ...",
+       bounds="> 0"),
+    _m("merge_s", NUMBER, FITTED, "... for this long are one UAV (unless updated by different "
+       "radar objects)", unit="s", bounds=">= 0", fit=TUNED),
+    _m("merge_keeps_live", BOOL, DESIGN, "a merge keeps the recently updated track"),
+    _m("emitter_doubt", NUMBER, DESIGN, "a track with an emitter: 1 - P(UAV) is multiplied by "
+       "this", bounds="[0, 1]"),
+    _m("velocity_weight", NUMBER, DESIGN, "weight of the reported velocity's NIS in the "
+       "assignment cost", bounds=">= 0"),
+    _m("velocity_sigma_mps", NUMBER, DESIGN, "error of a radar track's reported velocity, per "
+       "axis", unit="m/s", bounds="> 0"),
+    _m("continuity_bonus", NUMBER, DESIGN, "NIS credit for the radar object a track took last",
+       bounds=">= 0"),
+    _m("birth_age_s", NUMBER, DESIGN, "an object scoring association.thresholds.init_min "
+       "starts a track from this age", unit="s", bounds=">= 0",
+       null="association.stationary.min_age_s"),
+    _m("early_birth_age_s", NUMBER, FITTED, "... or from this age when moving at "
+       "early_birth_speed_mps", unit="s", bounds=">= 0", null="only from birth_age_s",
+       fit=TUNED),
+    _m("early_birth_speed_mps", NUMBER, DESIGN, "the mean speed of an early birth",
+       unit="m/s", bounds=">= 0"),
+    _m("birth_sep_m", NUMBER, DESIGN, "a strong object in a track's gate starts its own track "
+       "when the track took a report this far away in the same frame", unit="m",
+       bounds=">= 0", null="never"),
+    _m("flat_below_ground", BOOL, DESIGN, "a report below association.ghost.below_ground_m "
+       "updates east and north only"),
+    _m("class_by_age", BOOL, DESIGN, "read a young radar track's class for its age "
+       "(association.class.prior_logit)"),
+    _m("class_range_scale_m", NUMBER, DESIGN, "with class_by_age, a young track's class weight "
+       "is also multiplied by exp(-range / this)", unit="m", bounds="> 0", null="off"),
+    _m("class_range_age_s", NUMBER, DESIGN, "... while the track is younger than this",
+       unit="s", bounds=">= 0"),
+    _m("output_coast_s", NUMBER, FITTED, "a confirmed track is published while its last "
+       "update is this recent", unit="s", bounds=">= 0", null="while it lives", fit=TUNED),
+    _m("radar_output_s", NUMBER, DESIGN, "... and, inside radar cover, its last radar update",
+       unit="s", bounds=">= 0", null="no such rule"),
+    _m("emitter_misses", INTEGER, DESIGN, "this many fixes of its emitter in a row outside a "
+       "track's gate unlink the emitter", bounds=">= 1", null="never"),
+    _m("emitter_follow_min", NUMBER, DESIGN, "an object scoring this (below follow_min) that "
+       "its emitter's fixes credit may update the track carrying that emitter", null="off"),
+    _m("tentative_takes_radar", BOOL, DESIGN, "a tentative (RF) track may take radar reports"),
+)
+_SMOOTHER = (
+    _k("smoother.lag_s", "smoother_lag_s", NUMBER, DESIGN, "fixed-lag smoothing: each estimate "
+       "uses the data up to this long after it (.inf: offline RTS per track segment)",
+       unit="s", bounds="[0, inf]", null="none", used_by=TRACKER),
+)
+_EVALUATION = (
+    _k("evaluation.raw_radar_min_mean_uav_prob", "raw_radar_min_mean_uav_prob", NUMBER, DESIGN,
+       "the raw radar row counts reports of radar tracks whose mean UAV class probability "
+       "reaches this (not a filter setting)", bounds="[0, 1]", null="every report"),
+)
+
+#: Every profile key, in the order of the README.
+KEYS: tuple[Key, ...] = (
+    *_TOP, *_MOTION, *_MEASUREMENT, *_GATING, *_SOURCES, *_TRACK, *_UPDATE, *_ASSOCIATION,
+    *_SMOOTHER, *_MULTI, *_EVALUATION,
+)
+BY_PATH: dict[str, Key] = {k.path: k for k in KEYS}
+
+
+def find(path: str) -> Key | None:
+    """The key at a YAML path, or None."""
+    return BY_PATH.get(path)
+
+
+def belongs(name: str) -> list[str]:
+    """Where a key called ``name`` belongs: paths whose last part, or whose dataclass field
+    (the flat name it had before its section was split), is ``name``; sections so named."""
+    hits = [k.path for k in KEYS if name in (k.name, k.field)]
+    hits += [s for s in SECTIONS if s and s.rsplit(".", 1)[-1] == name]
+    return hits
