@@ -13,7 +13,8 @@ DEV_STAMP := $(VENV)/.dev-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 DOMAIN = $${ROS_DOMAIN_ID:-$$(( RANDOM % 100 + 1 ))}
 
-.PHONY: demo test lint bench bench-accuracy bench-node bench-sweep fuzz clean
+.PHONY: demo test lint bench bench-accuracy bench-node bench-sweep bench-load bench-multihost \
+	bench-stress fuzz clean
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -59,6 +60,21 @@ bench-node: $(DEV_STAMP)
 # sweep engine scaling: 2 Dask workers vs 1, and Dask's overhead vs a plain loop
 bench-sweep: $(RUNTIME_STAMP)
 	$(PY) scripts/bench_sweep.py
+
+# the node graph under load: lossless in-process speed, then separate processes at rising
+# replay rates until messages are lost (docs/faults.md); BENCH_ARGS e.g. "--rates 25 50 100"
+bench-load: $(RUNTIME_STAMP)
+	ROS_DOMAIN_ID=$(DOMAIN) $(PY) scripts/load_test.py $(BENCH_ARGS)
+
+# the graph across three hosts (unprivileged network namespaces; docs/deploy.md);
+# BENCH_ARGS e.g. "--rate 20 --rf-outage 10 --outage-after 15"
+bench-multihost: $(RUNTIME_STAMP)
+	$(PY) scripts/multihost.py $(BENCH_ARGS)
+
+# the paper profile on the twin's stress plans: what its largest radar track follows, the
+# radar reports it keeps and the fused error (docs/twin.md)
+bench-stress: $(RUNTIME_STAMP)
+	$(PY) scripts/twin_stress.py $(BENCH_ARGS)
 
 clean:
 	rm -rf build install log out .pytest_cache .mypy_cache .ruff_cache

@@ -113,7 +113,8 @@ from stonesoup.updater.kalman import KalmanUpdater
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import Profile, load_profile
 from uav_fusion.core.estimators.components import packed_to_array
-from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, TrackOutput, run_multi
+from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
+from uav_fusion.core.estimators.multi import MultiTracker, run_multi
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import (
     alignment_from_profile,

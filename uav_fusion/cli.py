@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "demo": "demo",
     "bench": "bench",
     "sweep": "sweep",
+    "analyse": "analyse",
     "profile": "profile",
 }
 
