@@ -53,7 +53,7 @@ def test_both_profiles_are_scored_as_the_benchmark_scores_them(
 
 
 def _score(**changes: float) -> GridScore:
-    fields = {f.name: 0 for f in dataclasses.fields(GridScore)}
+    fields: dict[str, float] = {f.name: 0 for f in dataclasses.fields(GridScore)}
     fields.update({"anees": math.nan, **changes})
     return GridScore(**fields)  # type: ignore[arg-type]
 
