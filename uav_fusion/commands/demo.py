@@ -9,7 +9,7 @@ and says whether the live table equals the offline one. With ``--compare`` (defa
 ``out/demo/<profile>/``), and the two tables are printed side by side. On the bundled flight
 it then shows what the tracker is for: both profiles on a stress flight of the accuracy
 benchmark, offline (:mod:`uav_fusion.commands.stress_flight`). ``--bag`` plays a bag instead
-(:mod:`uav_fusion.commands.bag_graph`), ``--multi`` runs the multi-UAV graph.
+(:mod:`uav_fusion.commands.playback`), ``--multi`` runs the multi-UAV graph.
 
 DDS discovery is kept on this machine: unless set already, ``ROS_AUTOMATIC_DISCOVERY_RANGE``
 is set to LOCALHOST and ``ROS_DOMAIN_ID`` to a random domain for this run.
@@ -164,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
             out = out / "multi"
         return _run_multi(args, out)
     if args.bag:
-        from uav_fusion.commands.bag_graph import run_bag
+        from uav_fusion.commands.playback import run_bag
 
         live = run_bag(args, _overrides(args, flight_dir, out))
         if live is None:
