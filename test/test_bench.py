@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from script_util import load_script
 
 from uav_fusion.cli import main
 from uav_fusion.core.bench.cache import LABELS_FILE, cached_flights, generate_flight, read_labels
@@ -166,16 +165,20 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     # warm cache: nothing generated again
     assert main(argv) == 0
     assert "2 flights cached, 0 to generate" in capsys.readouterr().out
-    # the README block is regenerated from the output folder
+    # --readme: the results file beside the README, and the README's table rendered from it
     readme = tmp_path / "README.md"
-    readme.write_text(
-        "# x\n<!-- bench-accuracy:begin -->\nold\n<!-- bench-accuracy:end -->\nafter\n"
-    )
-    mod = load_script("update_bench_readme")
-    assert mod.main([str(out), "--readme", str(readme)]) == 0
+    begin, end = "<!-- bench:tiny-test:begin -->", "<!-- bench:tiny-test:end -->"
+    readme.write_text(f"# x\n{begin}\nold\n{end}\nafter\n")
+    assert main([*argv, "--readme", str(readme)]) == 0
     new = readme.read_text()
-    assert "old" not in new and new.endswith("<!-- bench-accuracy:end -->\nafter\n")
-    assert "`uav_fusion bench --profiles paper paper_q8`" in new and md[2] in new
+    assert "old" not in new and new.endswith(f"{end}\nafter\n")
+    assert "`uav_fusion bench --definition tiny --profiles paper " in new and md[2] in new
+    results = json.loads((tmp_path / "bench" / "results" / "tiny-test.json").read_text())
+    assert results["kind"] == "accuracy" and set(results["profiles"]) == {"paper", "paper_q8"}
+    assert "commit" not in json.dumps(results) and "seconds" not in results["profiles"]["paper"]
+    # a README without the run's markers is refused before anything runs
+    readme.write_text("# x\n")
+    assert main([*argv, "--readme", str(readme)]) == 2
 
 
 def test_bench_command_rejects_duplicate_profile_names(tmp_path: Path) -> None:

@@ -166,8 +166,8 @@ def _tracker_profile(name: str, flag: str, analysis: str) -> Profile:
     p = load_profile(name)
     if not p.uses_tracker:
         raise ConfigError(
-            f"{flag} {name}: analyse {analysis} needs a tracker profile (association.mode "
-            f"track_score); {p.source or p.name} is not one"
+            f"{flag} {name}: analyse {analysis} needs a tracker profile ('estimator: tracker' "
+            f"or 'multi'); {p.source or p.name} is not one"
         )
     return p
 

@@ -5,7 +5,9 @@ flight of the split in parallel on a Dask cluster, scores each run's fixed-rate 
 one table (a row per profile, the pooled figures) with provenance, and writes the per-flight
 CSV, the figure, the table in Markdown and a JSON summary. A multi-UAV definition
 (``targets: multi``, e.g. ``--definition multi``) runs the multi-UAV tracker instead and
-scores every flight's tracks as a set (:mod:`uav_fusion.core.bench.multi`).
+scores every flight's tracks as a set (:mod:`uav_fusion.core.bench.multi`). With
+``--readme`` it also writes the pooled figures to ``bench/results/<definition>-<split>.json``
+and the table rendered from them into the README (:mod:`uav_fusion.core.bench.results`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 from uav_fusion.core.bench.cache import CachedFlight, cached_flights
 from uav_fusion.core.bench.definition import SPLITS, BenchDefinition, load_definition
@@ -31,6 +34,15 @@ from uav_fusion.core.bench.report import (
     write_csv,
     write_figure,
     write_summary_json,
+)
+from uav_fusion.core.bench.results import (
+    markers,
+    render_block,
+    replace_block,
+    results_doc,
+    results_name,
+    results_path,
+    write_results,
 )
 from uav_fusion.core.bench.single import GenerateTask, ScoreTask, generate_task, score_task
 from uav_fusion.core.errors import ConfigError
@@ -61,6 +73,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", help="output folder (default: out/bench/<definition>-<split>)")
     add_engine_arguments(parser)
     parser.add_argument("--no-figure", action="store_true", help="do not draw the figure")
+    parser.add_argument(
+        "--readme",
+        nargs="?",
+        const="README.md",
+        metavar="FILE",
+        help="also write the pooled figures to bench/results/<definition>-<split>.json beside "
+        "FILE and replace FILE's table between the bench:<definition>-<split> markers "
+        "(FILE default: README.md)",
+    )
 
 
 def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
@@ -99,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
     site_file = Path(args.site) if args.site else config_path(DEFAULT_SITE)
     site = load_site(site_file)
+    if args.readme:  # refuse before the run, not after it
+        _check_readme(Path(args.readme), results_name(definition.name, args.split))
     cache = Path(args.cache)
     flights = cached_flights(definition, args.split, cache, site_file)
     out = Path(args.out) if args.out else Path("out/bench") / f"{definition.name}-{args.split}"
@@ -173,8 +196,49 @@ def run(args: argparse.Namespace) -> int:
     prov["wall_time"] = timing
     json_path = write_summary_json(scores, prov, out / JSON_FILE)
     print(f"table (Markdown): {table_path}; summary: {json_path}")
+    if args.readme:
+        figures = {p: sc.as_dict() for p, sc in scores.items()}
+        _publish(args, definition, "accuracy", prov, figures)
     print(f"wall time {timing}")
     return 0
+
+
+def _check_readme(readme: Path, name: str) -> None:
+    begin, end = markers(name)
+    try:
+        text = readme.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"--readme {readme}: {exc.strerror or exc}") from None
+    if begin not in text or end not in text:
+        raise ConfigError(f"--readme {readme}: the markers {begin} / {end} are missing")
+
+
+def _command(args: argparse.Namespace, definition: BenchDefinition) -> str:
+    """The command line that reproduces the run's figures (engine and output options left out)."""
+    parts = ["uav_fusion bench"]
+    if definition.name != "accuracy":
+        parts.append(f"--definition {definition.name}")
+    parts.append("--profiles " + " ".join(args.profiles))
+    if args.split != "test":
+        parts.append(f"--split {args.split}")
+    return " ".join(parts)
+
+
+def _publish(
+    args: argparse.Namespace,
+    definition: BenchDefinition,
+    kind: str,
+    prov: dict[str, Any],
+    figures: dict[str, dict[str, Any]],
+) -> None:
+    """``--readme``: the results file, and the README's table rendered from it."""
+    readme = Path(args.readme)
+    name = results_name(definition.name, args.split)
+    doc = results_doc(kind, name, _command(args, definition), prov, figures)
+    path = write_results(results_path(readme, name), doc)
+    text = readme.read_text(encoding="utf-8")
+    readme.write_text(replace_block(text, name, render_block(doc)), encoding="utf-8")
+    print(f"results: {path}; {readme}: the bench:{name} table replaced")
 
 
 def _run_multi(
@@ -282,5 +346,7 @@ def _run_multi(
     json_path = out / JSON_FILE
     json_path.write_text(json.dumps(doc, indent=2, allow_nan=True) + "\n", encoding="utf-8")
     print(f"table (Markdown): {table_path}; summary: {json_path}")
+    if args.readme:
+        _publish(args, definition, "multi", prov, {k: v.as_dict() for k, v in scores.items()})
     print(f"wall time {timing}")
     return 0

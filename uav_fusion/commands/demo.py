@@ -6,7 +6,10 @@ the flight, has the evaluator write its report (Table II, metrics, figures) unde
 ``out/demo/`` and prints the table. It then runs the same flight through the core offline
 and says whether the live table equals the offline one. With ``--compare`` (default
 ``tracker``) the graph runs a second time with that profile (report under
-``out/demo/<profile>/``), and the two tables are printed side by side.
+``out/demo/<profile>/``), and the two tables are printed side by side. On the bundled flight
+it then shows what the tracker is for: both profiles on a stress flight of the accuracy
+benchmark, offline (:mod:`uav_fusion.commands.stress_flight`). ``--bag`` plays a bag instead
+(:mod:`uav_fusion.commands.playback`), ``--multi`` runs the multi-UAV graph.
 
 DDS discovery is kept on this machine: unless set already, ``ROS_AUTOMATIC_DISCOVERY_RANGE``
 is set to LOCALHOST and ``ROS_DOMAIN_ID`` to a random domain for this run.
@@ -94,6 +97,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--multi-seed", type=int, default=1, metavar="N", help="--multi: twin seed (default: 1)"
     )
+    parser.add_argument(
+        "--stress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="after the graph, run paper and the tracker offline on the benchmark's stress "
+        "flight zigzag_dash seed 201 (generated into --cache if missing) and print both "
+        "(default: on with the bundled flight, off with --flight, --bag or --multi)",
+    )
+    parser.add_argument(
+        "--cache",
+        default="out/bench_cache",
+        help="the benchmark's flight cache, for --stress (default: out/bench_cache)",
+    )
     parser.add_argument("--no-figures", action="store_true", help="write tables only")
     parser.add_argument("--no-check", action="store_true", help="skip the offline comparison")
     parser.add_argument(
@@ -148,7 +164,14 @@ def run(args: argparse.Namespace) -> int:
             out = out / "multi"
         return _run_multi(args, out)
     if args.bag:
-        return _run_bag(args, flight_dir, out)
+        from uav_fusion.commands.playback import run_bag
+
+        live = run_bag(args, _overrides(args, flight_dir, out))
+        if live is None:
+            return 1
+        if args.flight and not args.no_check:
+            return _compare_offline(args, flight_dir, live)
+        return 0
 
     from uav_fusion.core.scoring.evaluation import format_table
 
@@ -174,6 +197,10 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_check:
         for profile, live in lives.items():
             code = max(code, _compare_offline(args, flight_dir, live, profile))
+    if args.stress if args.stress is not None else not args.flight:
+        from uav_fusion.commands.stress_flight import run_stress
+
+        code = max(code, run_stress(Path(args.cache), args.site))
     return code
 
 
@@ -453,154 +480,6 @@ def format_side_by_side(lives: dict[str, Any], digits: int = 1) -> str:
         "(the full tables: report.md of each run)"
     )
     return "\n".join(lines)
-
-
-# What ``demo --bag --record`` records: the fusion node's outputs and views, and the inputs
-# (so the recording alone opens in Foxglove / RViz with config/foxglove_layout.json and
-# config/uav_fusion.rviz; docs/views.md).
-RECORDED_TOPICS = (
-    "fusion/odom",
-    "fusion/odom/updated",
-    "fusion/odom/coasted",
-    "fusion/accepted/radar",
-    "fusion/accepted/rf",
-    "fusion/path",
-    "fusion/markers",
-    "fusion/fix",
-    "radar/pose",
-    "radar/raw",
-    "rf/fix",
-    "truth/fix",
-    "/diagnostics",
-)
-
-
-def _run_bag(args: argparse.Namespace, flight_dir: Path, out: Path) -> int:
-    """The fusion and evaluator nodes fed by bag_player (bag time drives /clock)."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.impl.logging_severity import LoggingSeverity
-    from rclpy.logging import set_logger_level
-    from rclpy.node import Node
-    from rclpy.parameter import Parameter
-
-    from uav_fusion.core.scoring.evaluation import format_table
-    from uav_fusion.nodes.bag_player import BagPlayer
-    from uav_fusion.nodes.bag_recorder import BagRecorder
-    from uav_fusion.nodes.evaluator_node import EvaluatorNode
-    from uav_fusion.nodes.fusion_node import FusionNode
-
-    rate = args.rate if args.rate > 0 else 20.0  # the player paces by bag time: rate > 0
-    ov = _overrides(args, flight_dir, out)
-
-    def params(name: str) -> list[Parameter]:
-        return [Parameter(k, value=v) for k, v in ov[name].items()]
-
-    ctx = Context()
-    rclpy.init(context=ctx, args=[])
-    nodes: list[Node] = []
-    try:
-        fusion = FusionNode(context=ctx, parameter_overrides=params("fusion_node"))
-        nodes.append(fusion)
-        evaluator = EvaluatorNode(context=ctx, parameter_overrides=params("evaluator_node"))
-        nodes.append(evaluator)
-        player = BagPlayer(
-            bag=args.bag, context=ctx, parameter_overrides=[Parameter("rate", value=rate)]
-        )
-        nodes.append(player)
-        recorder: BagRecorder | None = None
-        if args.record:
-            recorder = BagRecorder(
-                output=args.record,
-                context=ctx,
-                parameter_overrides=[Parameter("topics", value=list(RECORDED_TOPICS))],
-            )
-            nodes.append(recorder)
-        if args.quiet:
-            for n in nodes:
-                set_logger_level(n.get_logger().name, LoggingSeverity.WARN)
-        ex = SingleThreadedExecutor(context=ctx)
-        for n in nodes:
-            ex.add_node(n)
-        print(f"demo: playing {args.bag} at {rate:g}x", flush=True)
-        t0 = time.monotonic()
-        player.start()
-        end = t0 + args.timeout
-
-        def spin_until(cond: Any) -> bool:
-            last, since = -1, time.monotonic()
-            while not cond():
-                now = time.monotonic()
-                n = sum(fusion.received.values()) + sum(evaluator.received.values())
-                if n != last:
-                    last, since = n, now
-                if now > end or (player.finished.is_set() and now - since > 5.0):
-                    return False
-                ex.spin_once(timeout_sec=0.02)
-            return True
-
-        played = player.played
-        to_fusion = ("/radar/pose", "/rf/fix")
-        ok = spin_until(
-            lambda: (
-                player.finished.is_set()
-                and sum(fusion.received.values()) >= sum(played[t] for t in to_fusion)
-            )
-        )
-        fusion.flush()
-        fusion.output.publish_views(force=True)  # the final path and markers
-        to_evaluator = ("/radar/raw", "/rf/fix", "/truth/fix")
-        expected = sum(played.get(t, 0) for t in to_evaluator)
-        ok = ok and spin_until(
-            lambda: (
-                sum(evaluator.received.values())
-                >= expected + fusion.output.steps_published + fusion.output.accepted_published
-            )
-        )
-        if recorder is not None:
-            # every step and accepted measurement the fusion node published is in the bag
-            ok = ok and spin_until(
-                lambda: (
-                    recorder.received["/fusion/odom"] >= fusion.steps_published
-                    and recorder.received["/fusion/accepted/radar"]
-                    + recorder.received["/fusion/accepted/rf"]
-                    >= fusion.output.accepted_published
-                    and recorder.received["/fusion/path"] >= fusion.output.paths_published
-                    and recorder.received["/fusion/markers"] >= fusion.output.markers_published
-                )
-            )
-            written = recorder.close()
-            print(
-                f"demo: recorded {written.message_count} messages into {args.record}",
-                flush=True,
-            )
-        if getattr(player, "error", None):
-            print(f"demo: bag_player: {player.error}", file=sys.stderr)
-            return 1
-        if not ok:
-            print("demo: not every message of the bag arrived", file=sys.stderr)
-            return 1
-        wall = time.monotonic() - t0
-        live = evaluator.evaluate()
-        files = evaluator.write_report()
-        steps = fusion.steps_published
-        dropped = dict(fusion.dropped)
-    finally:
-        for n in reversed(nodes):
-            n.destroy_node()
-        rclpy.shutdown(context=ctx)
-    print()
-    print(format_table(live))
-    print()
-    print(
-        f"demo: {sum(played.values())} messages played in {wall:.1f} s wall; {steps} filter "
-        f"steps; fusion drops: {dropped or 'none'}"
-    )
-    print(f"demo: report written to {files.folder}")
-    if args.flight and not args.no_check:
-        return _compare_offline(args, flight_dir, live)
-    return 0
 
 
 def _compare_offline(

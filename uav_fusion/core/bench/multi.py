@@ -410,12 +410,14 @@ def _fmt(fmt: str, v: Any) -> str:
     return fmt.format(v)
 
 
-def markdown_multi(scores: Mapping[str, MultiBenchScore]) -> str:
-    head = "| profile | flights | " + " | ".join(h for _, h, _ in _COLUMNS) + " |"
-    sep = "|---|---:|" + "---:|" * len(_COLUMNS)
+def markdown_multi(scores: Mapping[str, MultiBenchScore], timing: bool = True) -> str:
+    """The pooled row per profile; ``timing=False`` leaves the run time out."""
+    cols = [c for c in _COLUMNS if timing or c[0] != "run_s"]
+    head = "| profile | flights | " + " | ".join(h for _, h, _ in cols) + " |"
+    sep = "|---|---:|" + "---:|" * len(cols)
     rows = [
         f"| {s.profile} | {s.flights} | "
-        + " | ".join(_fmt(f, getattr(s, k)) for k, _, f in _COLUMNS)
+        + " | ".join(_fmt(f, getattr(s, k)) for k, _, f in cols)
         + " |"
         for s in scores.values()
     ]
