@@ -329,7 +329,8 @@ class ObjectTable:
             b = 1.0 - a
             if not (coast and cfg.skip_radar_coasts):
                 # a coast is the radar's own prediction: no new measurement for the filter
-                nis = kf.predict_update3(t - obj.kf_t, e, n, u, r)
+                kf.predict(t - obj.kf_t)
+                nis = kf.update3(e, n, u, r)
                 obj.kf_t = t
                 if math.isfinite(nis):
                     # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
