@@ -3,9 +3,10 @@
 Table II (:mod:`uav_fusion.core.scoring.evaluation`) scores the estimates the filter
 happens to make, at the measurement times. A user sees the fixed-rate output instead
 (:mod:`uav_fusion.core.estimators.grid`): at every epoch ``k / frequency`` either a
-published track state or nothing. This module scores that output over the **airborne epochs**: grid epochs where the
-truth, linearly interpolated, is more than ``airborne_min_m`` (5 m) above the take-off point
-(epochs inside a truth gap longer than ``max_truth_gap_s`` are not scored).
+published track state or nothing. This module scores that output over the **airborne
+epochs**: grid epochs where the truth, linearly interpolated, is more than
+``airborne_min_m`` (5 m) above the take-off point (epochs inside a truth gap longer than
+``max_truth_gap_s`` are not scored).
 
 Per flight, and pooled over flights (:func:`pool`):
 
