@@ -68,14 +68,13 @@ from uav_fusion.core.scoring.evaluation import COASTED, UPDATED, Evaluation, Eva
 from uav_fusion.core.scoring.fixed_rate import FlightTruth, GridScore, score_grid
 from uav_fusion.core.scoring.fixed_rate import pool as pool_grid
 from uav_fusion.core.scoring.gospa import (
-    MultiScore,
     MultiScoreSettings,
     UavTruth,
     epochs_from_published,
-    multi_summary,
     score_flight,
 )
 from uav_fusion.core.scoring.gospa import pool as pool_multi
+from uav_fusion.core.scoring.outcomes import MultiScore, multi_summary
 from uav_fusion.core.scoring.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.ros.app import run_node
