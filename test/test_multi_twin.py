@@ -14,7 +14,8 @@ from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, run_multi
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight
-from uav_fusion.core.scoring.gospa import FlightSamples, UavTruth, score_flight
+from uav_fusion.core.scoring.gospa import UavTruth, score_flight
+from uav_fusion.core.scoring.outcomes import FlightSamples
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin.config import load_twin_config
 from uav_fusion.core.twin.generate import TwinFlight, generate_twin, twin_to_flight

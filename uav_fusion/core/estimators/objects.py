@@ -289,43 +289,22 @@ class ObjectTable:
         sig = (vel, rcs)
         old = obj.signature
         coast = old is not None and vel is not None and sig == old
+        # one smoothing factor per time constant for this interval (the EMAs below)
+        tau = cfg.speed_tau_s
         if kf is None or dt < 0:
-            q = cfg.object_q
-            kf = obj.kf = CvKalman((q, q, q))
-            kf.x = [e, n, u, 0.0, 0.0, 0.0]
-            v = 100.0
-            kf.P = [
-                r[0], r[1], r[2], 0.0, 0.0, 0.0,
-                r[3], r[4], 0.0, 0.0, 0.0,
-                r[5], 0.0, 0.0, 0.0,
-                v, 0.0, 0.0,
-                v, 0.0,
-                v,
-            ]  # fmt: skip
+            kf = self._start_filter(obj, t, e, n, u, r, rcs)
             dt = 0.0
-            obj.kf_t = t
-            obj.up = u
-            obj.sd_up = math.sqrt(r[5])
-            if rcs is not None and math.isfinite(rcs):
-                obj.rcs_mean = rcs
-                obj.rcs_seen = True
-            else:
-                obj.rcs_mean = 0.0
-            # one smoothing factor per time constant for this interval (the EMAs below)
-            a = 0.0 if cfg.speed_tau_s <= 0 else 1.0
-            b = 1.0 - a
+            a = 0.0 if tau <= 0 else 1.0
         else:
-            # one smoothing factor per time constant for this interval (the EMAs below)
-            tau = cfg.speed_tau_s
             a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
-            b = 1.0 - a
             if not (coast and cfg.skip_radar_coasts):
                 # a coast is the radar's own prediction: no new measurement for the filter
-                nis = kf.predict_update3(t - obj.kf_t, e, n, u, r)
+                kf.predict(t - obj.kf_t)
+                nis = kf.update3(e, n, u, r)
                 obj.kf_t = t
                 if math.isfinite(nis):
                     # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
-                    obj.nis_mean = a * obj.nis_mean + b * (100.0 if nis > 100.0 else nis)
+                    obj.nis_mean = a * obj.nis_mean + (1.0 - a) * (100.0 if nis > 100.0 else nis)
         if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
             vn, ve, vd = vel
             spd = math.sqrt(vn * vn + ve * ve + vd * vd)
@@ -335,62 +314,116 @@ class ObjectTable:
         if n_reports == 0:
             obj.speed = spd
         else:
-            obj.speed = a * obj.speed + b * spd
-            obj.up = a * obj.up + b * u
-            obj.sd_up = a * obj.sd_up + b * math.sqrt(r[5])
-            if rcs is not None and math.isfinite(rcs):
-                if obj.rcs_seen:
-                    obj.rcs_mean = a * obj.rcs_mean + b * rcs
-                else:
-                    obj.rcs_mean = rcs
-                    obj.rcs_seen = True
-            k = cfg.ground_release_sigmas
-            if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
-                obj.aloft = True
+            self._fold_motion(obj, spd, u, r[5], rcs, a)
         p = trk.uav_prob
         if p is not None and math.isfinite(p):
-            # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
-            c = cfg.class_clip
-            pc = 1e-6 if p < 1e-6 else p
-            if pc > 1.0 - 1e-6:
-                pc = 1.0 - 1e-6
-            lg = math.log(pc / (1.0 - pc))
-            prior = cfg.class_prior_logit
-            if prior is not None:
-                # the report's distance from the prior, for the track's age
-                age = t - obj.first_t
-                w = 1.0 - math.exp(-age / cfg.class_age_tau_s)
-                rng_m = trk.range_m
-                if (
-                    age < cfg.class_range_age_s
-                    and cfg.class_range_scale_m > 0.0
-                    and rng_m is not None
-                    and math.isfinite(rng_m)
-                ):
-                    # a far track's classifier has fewer features to go on: its output leaves
-                    # the prior more slowly
-                    w *= math.exp(-rng_m / cfg.class_range_scale_m)
-                if w < cfg.class_min_weight:
-                    w = cfg.class_min_weight
-                lg = prior + (lg - prior) / w
-            if c < lg:
-                lg = c
-            if -c > lg:
-                lg = -c
-            if n_reports == 0:  # with a prior (and a history) the history starts there
-                obj.class_logit = lg if prior is None or cfg.class_tau_s <= 0 else prior
-            else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
-                tau = cfg.class_tau_s
-                if tau <= 0:
-                    obj.class_logit = lg
-                else:
-                    a = math.exp(-dt / tau) if dt > 0 else 1.0
-                    obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
+            self._fold_class(obj, trk, p, dt, n_reports == 0)
         obj.coasting = coast
         obj.signature = sig
         obj.n_reports = n_reports + 1
         obj.last_t = t
         return obj
+
+    def _start_filter(
+        self,
+        obj: RadarObject,
+        t: float,
+        e: float,
+        n: float,
+        u: float,
+        r: PackedR,
+        rcs: float | None,
+    ) -> CvKalman:
+        """(Re)start the object's filter at a report (its first, or one older than its last)
+        and the running height and RCS at the report's."""
+        q = self.cfg.object_q
+        kf = obj.kf = CvKalman((q, q, q))
+        kf.x = [e, n, u, 0.0, 0.0, 0.0]
+        v = 100.0
+        kf.P = [
+            r[0], r[1], r[2], 0.0, 0.0, 0.0,
+            r[3], r[4], 0.0, 0.0, 0.0,
+            r[5], 0.0, 0.0, 0.0,
+            v, 0.0, 0.0,
+            v, 0.0,
+            v,
+        ]  # fmt: skip
+        obj.kf_t = t
+        obj.up = u
+        obj.sd_up = math.sqrt(r[5])
+        if rcs is not None and math.isfinite(rcs):
+            obj.rcs_mean = rcs
+            obj.rcs_seen = True
+        else:
+            obj.rcs_mean = 0.0
+        return kf
+
+    def _fold_motion(
+        self, obj: RadarObject, spd: float, u: float, r_uu: float, rcs: float | None, a: float
+    ) -> None:
+        """Fold a report after the first into the object's moving averages of speed, height,
+        vertical sigma (``r_uu``: the report's vertical variance) and RCS, with the
+        smoothing factor ``a`` of the interval, and note when it has risen clear of the
+        ground."""
+        cfg = self.cfg
+        b = 1.0 - a
+        obj.speed = a * obj.speed + b * spd
+        obj.up = a * obj.up + b * u
+        obj.sd_up = a * obj.sd_up + b * math.sqrt(r_uu)
+        if rcs is not None and math.isfinite(rcs):
+            if obj.rcs_seen:
+                obj.rcs_mean = a * obj.rcs_mean + b * rcs
+            else:
+                obj.rcs_mean = rcs
+                obj.rcs_seen = True
+        k = cfg.ground_release_sigmas
+        if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
+            obj.aloft = True
+
+    def _fold_class(
+        self, obj: RadarObject, trk: RadarTrack, p: float, dt: float, first: bool
+    ) -> None:
+        """Fold a report's UAV class probability ``p`` (finite) into the object's class
+        history (``dt`` since its previous report; ``first``: its first report), read for
+        the track's age and range when the profile sets a class prior (module text)."""
+        cfg = self.cfg
+        # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
+        c = cfg.class_clip
+        pc = 1e-6 if p < 1e-6 else p
+        if pc > 1.0 - 1e-6:
+            pc = 1.0 - 1e-6
+        lg = math.log(pc / (1.0 - pc))
+        prior = cfg.class_prior_logit
+        if prior is not None:
+            # the report's distance from the prior, for the track's age
+            age = trk.t - obj.first_t
+            w = 1.0 - math.exp(-age / cfg.class_age_tau_s)
+            rng_m = trk.range_m
+            if (
+                age < cfg.class_range_age_s
+                and cfg.class_range_scale_m > 0.0
+                and rng_m is not None
+                and math.isfinite(rng_m)
+            ):
+                # a far track's classifier has fewer features to go on: its output leaves
+                # the prior more slowly
+                w *= math.exp(-rng_m / cfg.class_range_scale_m)
+            if w < cfg.class_min_weight:
+                w = cfg.class_min_weight
+            lg = prior + (lg - prior) / w
+        if c < lg:
+            lg = c
+        if -c > lg:
+            lg = -c
+        if first:  # with a prior (and a history) the history starts there
+            obj.class_logit = lg if prior is None or cfg.class_tau_s <= 0 else prior
+        else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
+            tau = cfg.class_tau_s
+            if tau <= 0:
+                obj.class_logit = lg
+            else:
+                a = math.exp(-dt / tau) if dt > 0 else 1.0
+                obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
 
     def mark_fused(self, obj: RadarObject, inside: bool, t: float) -> None:
         """Record whether the object's report at ``t`` fell inside the UAV track's gate."""
