@@ -83,9 +83,7 @@ from scipy.optimize import linear_sum_assignment
 
 from uav_fusion.core.estimators.base import drive
 from uav_fusion.core.estimators.components import (
-    Deleter,
     MofN,
-    PolarRadarR,
     RadarAlignment,
     scale_packed,
 )
@@ -93,19 +91,16 @@ from uav_fusion.core.estimators.filters import MotionFilter
 from uav_fusion.core.estimators.grid import EpochClock, GridEpoch, GridState, Outputs, TrackOutput
 from uav_fusion.core.estimators.kalman import PackedR, expand_upper
 from uav_fusion.core.estimators.multi_settings import MultiSettings
-from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
-from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.estimators.selection import frames_input
-from uav_fusion.core.estimators.steps import Step, nis_gate
-from uav_fusion.core.estimators.tracker import (
-    alignment_from_profile,
+from uav_fusion.core.estimators.objects import RadarObject
+from uav_fusion.core.estimators.parts import (
+    RadarFront,
+    TrackParts,
     motion_filter_from_profile,
     object_start,
-    radar_gates2,
-    radar_model_from_profile,
-    rf_model_from_profile,
-    robust_from_profile,
 )
+from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
 
@@ -194,23 +189,15 @@ class MultiTracker:
                 class_range_scale_m=st.class_range_scale_m,
                 class_range_age_s=st.class_range_age_s,
             )
-        self.radar_r = radar_model_from_profile(profile, site)
-        self._align = alignment_from_profile(profile, site)
-        self.rf_r = rf_model_from_profile(profile)
-        self.robust = robust_from_profile(profile)
-        r_obj = self.radar_r
-        self._extra_var = 0.0
-        if isinstance(r_obj, PolarRadarR):
-            f_obj = min(r_obj.floor_m, self.cfg.object_floor_m)
-            self._extra_var = r_obj.floor_m**2 - f_obj**2
-            r_obj = replace(r_obj, floor_m=f_obj)
-        self._r_obj = r_obj
-        self.objects = ObjectTable(self.cfg, r_obj)
-        self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
-        self._g2 = nis_gate(profile.nis_probability, 2)
-        self._g3 = nis_gate(profile.nis_probability, 3)
-        self._gate2, self._far2 = radar_gates2(profile, site)  # far: 0 without a far gate
-        self._radar_pos = tuple(float(v) for v in site.radar.enu)
+        self.front = RadarFront(profile, site, self.cfg)
+        self.objects = self.front.objects
+        self.radar_r = self.front.radar_r
+        parts = TrackParts(profile)
+        self.rf_r = parts.rf_r
+        self.robust = parts.robust
+        self.deleter = parts.deleter
+        self._g2 = parts.g2
+        self._g3 = parts.g3
         self.tracks: list[UavTrack] = []
         self._next_id = 1
         self.counters: dict[str, int] = {}
@@ -271,7 +258,7 @@ class MultiTracker:
     def alignment(self) -> RadarAlignment | None:
         """The radar's misalignment correction applied to every report before use (None:
         the profile has none)."""
-        return self._align
+        return self.front.align
 
     # --- output ---------------------------------------------------------------------------
     def _count(self, key: str, n: int = 1) -> None:
@@ -320,9 +307,9 @@ class MultiTracker:
             return True
         if tr.last_radar_t is not None and t - tr.last_radar_t <= st.radar_output_s:
             return True
-        rx, ry, rz = self._radar_pos
+        rx, ry, rz = self.front.radar_pos
         d2 = (x[0] - rx) ** 2 + (x[1] - ry) ** 2 + (x[2] - rz) ** 2
-        return d2 > self._gate2
+        return d2 > self.front.gate2
 
     # --- track life ------------------------------------------------------------------------
     def _new_track(self, t: float, x: list[float], P: FloatArray, confirmed: bool) -> UavTrack:
@@ -365,8 +352,6 @@ class MultiTracker:
     def process_radar_frame(self, frame: RadarFrame) -> None:
         t = frame.t
         cfg = self.cfg
-        dv = self._extra_var
-        rx, ry, rz = self._radar_pos
         cands: list[_Cand] = []
         far_cands: set[int] = set()  # candidates beyond the range gate (horizontal only)
         weak: set[int] = set()  # candidates for the track of their object's emitter only
@@ -374,28 +359,17 @@ class MultiTracker:
         flat = self.settings.flat_below_ground
         if frame.tracks:
             self._count("radar_reports", len(frame.tracks))
-        r_at = self._r_obj.r_at
-        update_object = self.objects.update
-        gate2 = self._gate2
-        far2 = self._far2
+        bad, reports = self.front.reports(frame)
+        if bad:
+            self._count("rejected_invalid", len(bad))
+        gate2 = self.front.gate2
+        far2 = self.front.far2
         skip_coasts = cfg.skip_radar_coasts
-        isfinite = math.isfinite
-        align = self._align.point if self._align is not None else None
-        for trk in frame.tracks:
-            e, n_, u = trk.e, trk.n, trk.u
-            if not isfinite(trk.t + e + n_ + u):
-                self._count("rejected_invalid")
-                continue
-            if align is not None:  # the radar's misalignment
-                e, n_, u = align(e, n_, u)
-            ro = r_at(e, n_, u)
-            p3 = (e, n_, u)
-            obj = update_object(trk, ro, p3)
-            z: tuple[float, ...] = p3
-            r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
-            d2 = (e - rx) ** 2 + (n_ - ry) ** 2 + (u - rz) ** 2
+        for _, trk, obj, p3, r, d2 in reports:
             if (d2 > gate2 and not d2 <= far2) or (skip_coasts and obj.coasting):
                 continue
+            e, n_, u = p3
+            z: tuple[float, ...] = p3
             s = obj.score(cfg)
             if d2 > gate2:
                 # inside the far gate: horizontal only
