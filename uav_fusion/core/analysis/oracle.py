@@ -69,14 +69,10 @@ from uav_fusion.core.bench.multi import (
 )
 from uav_fusion.core.bench.single import ScoreTask, score_task
 from uav_fusion.core.estimators.components import scale_packed
+from uav_fusion.core.estimators.emitters import emitter_key
 from uav_fusion.core.estimators.grid import Grid, grid_from_published
 from uav_fusion.core.estimators.kalman import PackedR
-from uav_fusion.core.estimators.multi import (
-    MultiTracker,
-    UavTrack,
-    emitter_key,
-    run_multi,
-)
+from uav_fusion.core.estimators.multi import MultiTracker, UavTrack, run_multi
 from uav_fusion.core.estimators.multi_settings import MultiSettings
 from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.estimators.parts import object_start
@@ -195,9 +191,9 @@ class LabelOracle(MultiTracker):
         z = (att.e, att.n)
         tr = self._track_of(vehicle)
         if tr is None:  # as the tracker: an RF start is tentative, confirmed by M of N fixes
-            self._own(vehicle, self._rf_start(t, z, r))
+            self._own(vehicle, self.emitters.start(t, z, r))
             return
-        self._rf_to(tr, t, z, r)
+        self.emitters.update(tr, t, z, r)
 
 
 # --- multi-UAV --------------------------------------------------------------------------------

@@ -53,6 +53,7 @@ from uav_fusion.core.estimators.parts import (
     RadarFront,
     TrackParts,
     motion_filter_from_profile,
+    rf_start,
 )
 from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
@@ -485,11 +486,7 @@ class Tracker:
 
     def _start_rf(self, t: float, z: tuple[float, ...], r: PackedR) -> TrackerStep:
         p = self.profile
-        x = [z[0], z[1], p.rf_init_altitude_m, 0.0, 0.0, 0.0]
-        P = np.zeros((6, 6))
-        P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
-        P[2, 2] = p.rf_init_altitude_std_m**2
-        P[3, 3] = P[4, 4] = P[5, 5] = p.init_velocity_std_mps**2
+        x, P = rf_start(z, r, p)
         tentative = RF in p.tentative_sources and p.confirm_m > 1
         self._start(t, x, P, tentative=tentative)
         if tentative:
