@@ -15,12 +15,12 @@ from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.components import packed_to_array
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import cv_process_noise
-from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.estimators.tracker import (
+from uav_fusion.core.estimators.parts import (
     alignment_from_profile,
     radar_model_from_profile,
     rf_model_from_profile,
 )
+from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 

@@ -17,14 +17,12 @@ import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import load_profile, profile_from_dict
+from uav_fusion.core.estimators.emitters import UNKNOWN_EMITTER, emitter_key
+from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.multi import (
-    UNKNOWN_EMITTER,
-    GridEpoch,
     MultiSettings,
     MultiTracker,
-    TrackOutput,
     _merge_nis,
-    emitter_key,
     run_multi,
     velocity_nis,
 )

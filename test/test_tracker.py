@@ -19,7 +19,8 @@ from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.components import FixedRadarR, RadarAlignment
 from uav_fusion.core.estimators.objects import ObjectTable, ScoreConfig
 from uav_fusion.core.estimators.offline import run_tracker
-from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+from uav_fusion.core.estimators.steps import TrackerStep
+from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import Site, load_site
 

@@ -83,47 +83,34 @@ from scipy.optimize import linear_sum_assignment
 
 from uav_fusion.core.estimators.base import drive
 from uav_fusion.core.estimators.components import (
-    Deleter,
     MofN,
-    PolarRadarR,
     RadarAlignment,
     scale_packed,
 )
+from uav_fusion.core.estimators.emitters import Emitters
 from uav_fusion.core.estimators.filters import MotionFilter
 from uav_fusion.core.estimators.grid import EpochClock, GridEpoch, GridState, Outputs, TrackOutput
 from uav_fusion.core.estimators.kalman import PackedR, expand_upper
 from uav_fusion.core.estimators.multi_settings import MultiSettings
-from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
-from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.estimators.selection import frames_input
-from uav_fusion.core.estimators.steps import Step, nis_gate
-from uav_fusion.core.estimators.tracker import (
-    alignment_from_profile,
+from uav_fusion.core.estimators.objects import RadarObject
+from uav_fusion.core.estimators.parts import (
+    RadarFront,
+    TrackParts,
     motion_filter_from_profile,
     object_start,
-    radar_gates2,
-    radar_model_from_profile,
-    rf_model_from_profile,
-    robust_from_profile,
 )
+from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Emitter key of RF fixes without a centre frequency.
-UNKNOWN_EMITTER = "unknown"
 _FORBIDDEN = 1.0e9
 # a radar report that may update a track: the report, its object, the object's UAV score, R
 # and the measurement (e, n, u; or e, n for a report below the ground: ``flat_below_ground``)
 _Cand = tuple[RadarTrack, RadarObject, float, PackedR, tuple[float, ...]]
-
-
-def emitter_key(freq_hz: float | None) -> str:
-    """The emitter a fix belongs to: its centre frequency in whole kHz, or ``unknown``."""
-    if freq_hz is None or not math.isfinite(freq_hz):
-        return UNKNOWN_EMITTER
-    return f"{round(freq_hz / 1e3):d}kHz"
 
 
 class UavTrack:
@@ -194,23 +181,16 @@ class MultiTracker:
                 class_range_scale_m=st.class_range_scale_m,
                 class_range_age_s=st.class_range_age_s,
             )
-        self.radar_r = radar_model_from_profile(profile, site)
-        self._align = alignment_from_profile(profile, site)
-        self.rf_r = rf_model_from_profile(profile)
-        self.robust = robust_from_profile(profile)
-        r_obj = self.radar_r
-        self._extra_var = 0.0
-        if isinstance(r_obj, PolarRadarR):
-            f_obj = min(r_obj.floor_m, self.cfg.object_floor_m)
-            self._extra_var = r_obj.floor_m**2 - f_obj**2
-            r_obj = replace(r_obj, floor_m=f_obj)
-        self._r_obj = r_obj
-        self.objects = ObjectTable(self.cfg, r_obj)
-        self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
-        self._g2 = nis_gate(profile.nis_probability, 2)
-        self._g3 = nis_gate(profile.nis_probability, 3)
-        self._gate2, self._far2 = radar_gates2(profile, site)  # far: 0 without a far gate
-        self._radar_pos = tuple(float(v) for v in site.radar.enu)
+        self.front = RadarFront(profile, site, self.cfg)
+        self.objects = self.front.objects
+        self.radar_r = self.front.radar_r
+        parts = TrackParts(profile)
+        self.rf_r = parts.rf_r
+        self.robust = parts.robust
+        self.deleter = parts.deleter
+        self._g2 = parts.g2
+        self._g3 = parts.g3
+        self.emitters = Emitters(self)
         self.tracks: list[UavTrack] = []
         self._next_id = 1
         self.counters: dict[str, int] = {}
@@ -271,7 +251,7 @@ class MultiTracker:
     def alignment(self) -> RadarAlignment | None:
         """The radar's misalignment correction applied to every report before use (None:
         the profile has none)."""
-        return self._align
+        return self.front.align
 
     # --- output ---------------------------------------------------------------------------
     def _count(self, key: str, n: int = 1) -> None:
@@ -320,9 +300,9 @@ class MultiTracker:
             return True
         if tr.last_radar_t is not None and t - tr.last_radar_t <= st.radar_output_s:
             return True
-        rx, ry, rz = self._radar_pos
+        rx, ry, rz = self.front.radar_pos
         d2 = (x[0] - rx) ** 2 + (x[1] - ry) ** 2 + (x[2] - rz) ** 2
-        return d2 > self._gate2
+        return d2 > self.front.gate2
 
     # --- track life ------------------------------------------------------------------------
     def _new_track(self, t: float, x: list[float], P: FloatArray, confirmed: bool) -> UavTrack:
@@ -364,38 +344,58 @@ class MultiTracker:
     # --- radar ------------------------------------------------------------------------------
     def process_radar_frame(self, frame: RadarFrame) -> None:
         t = frame.t
+        cands, far_cands, weak = self._candidates(frame)
+        self._advance(t)
+        take_tentative = self.settings.tentative_takes_radar
+        live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
+        g2 = self._g2
+        g3 = self._g3
+        nis_rows: list[list[float]] = []
+        for tr in live:
+            f = tr.filter
+            row = []
+            for c in cands:
+                n = f.nis(c[4], c[3])
+                row.append(n if len(c[4]) == 3 else n * g3 / g2)  # 2D on the 3D gate's scale
+            nis_rows.append(row)
+        took: dict[int, int] = {}  # live track index -> the candidate it took
+        if live and cands:
+            took = self._assign(t, live, cands, weak, nis_rows)
+        # a confirmed track whose own object reported outside its gate: a rejection
+        for a, tr in enumerate(live):
+            if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
+                continue
+            for b, c in enumerate(cands):
+                if c[0].track_id == tr.followed and nis_rows[a][b] > g3:
+                    self._reject(tr)
+                    break
+        self._births(t, cands, far_cands, set(took.values()), took, nis_rows)
+        self._merge(t)
+
+    def _candidates(self, frame: RadarFrame) -> tuple[list[_Cand], set[int], set[int]]:
+        """The frame's reports that may update a track (every report updates its radar
+        object first), the indices of those beyond the range gate (horizontal only), and of
+        the weak ones (for the track of their object's emitter only)."""
+        t = frame.t
         cfg = self.cfg
-        dv = self._extra_var
-        rx, ry, rz = self._radar_pos
         cands: list[_Cand] = []
-        far_cands: set[int] = set()  # candidates beyond the range gate (horizontal only)
-        weak: set[int] = set()  # candidates for the track of their object's emitter only
+        far_cands: set[int] = set()
+        weak: set[int] = set()
         efm = self.settings.emitter_follow_min
         flat = self.settings.flat_below_ground
         if frame.tracks:
             self._count("radar_reports", len(frame.tracks))
-        r_at = self._r_obj.r_at
-        update_object = self.objects.update
-        gate2 = self._gate2
-        far2 = self._far2
+        bad, reports = self.front.reports(frame)
+        if bad:
+            self._count("rejected_invalid", len(bad))
+        gate2 = self.front.gate2
+        far2 = self.front.far2
         skip_coasts = cfg.skip_radar_coasts
-        isfinite = math.isfinite
-        align = self._align.point if self._align is not None else None
-        for trk in frame.tracks:
-            e, n_, u = trk.e, trk.n, trk.u
-            if not isfinite(trk.t + e + n_ + u):
-                self._count("rejected_invalid")
-                continue
-            if align is not None:  # the radar's misalignment
-                e, n_, u = align(e, n_, u)
-            ro = r_at(e, n_, u)
-            p3 = (e, n_, u)
-            obj = update_object(trk, ro, p3)
-            z: tuple[float, ...] = p3
-            r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
-            d2 = (e - rx) ** 2 + (n_ - ry) ** 2 + (u - rz) ** 2
+        for _, trk, obj, p3, r, d2 in reports:
             if (d2 > gate2 and not d2 <= far2) or (skip_coasts and obj.coasting):
                 continue
+            e, n_, u = p3
+            z: tuple[float, ...] = p3
             s = obj.score(cfg)
             if d2 > gate2:
                 # inside the far gate: horizontal only
@@ -420,76 +420,81 @@ class MultiTracker:
             if d2 > gate2:
                 far_cands.add(len(cands))
             cands.append((trk, obj, s, r, z))
-        self._advance(t)
-        take_tentative = self.settings.tentative_takes_radar
-        live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
+        return cands, far_cands, weak
+
+    def _assign(
+        self,
+        t: float,
+        live: list[UavTrack],
+        cands: list[_Cand],
+        weak: set[int],
+        nis_rows: list[list[float]],
+    ) -> dict[int, int]:
+        """Tracks and candidates one to one (Hungarian assignment); every assigned report
+        updates its track. Returns live track index -> the candidate it took."""
         g2 = self._g2
         g3 = self._g3
-        nis_rows: list[list[float]] = []
-        for tr in live:
-            f = tr.filter
-            row = []
-            for c in cands:
-                n = f.nis(c[4], c[3])
-                row.append(n if len(c[4]) == 3 else n * g3 / g2)  # 2D on the 3D gate's scale
-            nis_rows.append(row)
-        taken: set[int] = set()
-        took: dict[int, int] = {}  # live track index -> the candidate it took
-        if live and cands:
-            # NIS, less a bonus for the object the track followed last; the UAV score only
-            # decides who may update a track (follow_min): between two UAVs it says nothing
-            st = self.settings
-            bonus = st.continuity_bonus
-            wv = st.velocity_weight
-            s2 = st.velocity_sigma_mps**2
-            cost_rows: list[list[float]] = []
-            any_inside = False
-            for tr, row in zip(live, nis_rows, strict=True):
-                x, pk = tr.filter.mean() if wv > 0.0 else ([], [])
-                crow = []
-                for bi, (c, n) in enumerate(zip(cands, row, strict=True)):
-                    if not n <= g3 or (bi in weak and (c[1].rf_key != tr.emitter)):
-                        crow.append(_FORBIDDEN)
-                        continue
-                    any_inside = True
-                    v = n - bonus * (c[0].track_id == tr.followed)
-                    if wv > 0.0:
-                        v += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
-                    crow.append(v)
-                cost_rows.append(crow)
-            if any_inside:
-                cost = np.array(cost_rows)
-                rows, cols = linear_sum_assignment(cost)
-                for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
-                    if cost_rows[a][b] >= _FORBIDDEN:
-                        continue
-                    tr = live[a]
-                    trk, obj, s, r, z = cands[b]
-                    dof = len(z)
-                    n = nis_rows[a][b] if dof == 3 else nis_rows[a][b] * g2 / g3
-                    w = self.robust.weight(n, dof)
-                    if dof == 2:
-                        self._hold_height(tr)
-                    tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
-                    self._accept(tr, t)
-                    if not tr.confirmed:
-                        tr.confirmed = True
-                        tr.mofn = None
-                        self._count("confirmed")
-                    tr.followed = trk.track_id
-                    tr.last_radar_t = t
-                    tr.score = s
-                    taken.add(b)
-                    took[a] = b
-        # a confirmed track whose own object reported outside its gate: a rejection
-        for a, tr in enumerate(live):
-            if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
+        took: dict[int, int] = {}
+        # NIS, less a bonus for the object the track followed last; the UAV score only
+        # decides who may update a track (follow_min): between two UAVs it says nothing
+        st = self.settings
+        bonus = st.continuity_bonus
+        wv = st.velocity_weight
+        s2 = st.velocity_sigma_mps**2
+        cost_rows: list[list[float]] = []
+        any_inside = False
+        for tr, row in zip(live, nis_rows, strict=True):
+            x, pk = tr.filter.mean() if wv > 0.0 else ([], [])
+            crow = []
+            for bi, (c, n) in enumerate(zip(cands, row, strict=True)):
+                if not n <= g3 or (bi in weak and (c[1].rf_key != tr.emitter)):
+                    crow.append(_FORBIDDEN)
+                    continue
+                any_inside = True
+                v = n - bonus * (c[0].track_id == tr.followed)
+                if wv > 0.0:
+                    v += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
+                crow.append(v)
+            cost_rows.append(crow)
+        if not any_inside:
+            return took
+        cost = np.array(cost_rows)
+        rows, cols = linear_sum_assignment(cost)
+        for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
+            if cost_rows[a][b] >= _FORBIDDEN:
                 continue
-            for b, c in enumerate(cands):
-                if c[0].track_id == tr.followed and nis_rows[a][b] > g3:
-                    self._reject(tr)
-                    break
-        # strong objects that no track explains start tracks
+            tr = live[a]
+            trk, _obj, s, r, z = cands[b]
+            dof = len(z)
+            n = nis_rows[a][b] if dof == 3 else nis_rows[a][b] * g2 / g3
+            w = self.robust.weight(n, dof)
+            if dof == 2:
+                self._hold_height(tr)
+            tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
+            self._accept(tr, t)
+            if not tr.confirmed:
+                tr.confirmed = True
+                tr.mofn = None
+                self._count("confirmed")
+            tr.followed = trk.track_id
+            tr.last_radar_t = t
+            tr.score = s
+            took[a] = b
+        return took
+
+    def _births(
+        self,
+        t: float,
+        cands: list[_Cand],
+        far_cands: set[int],
+        taken: set[int],
+        took: dict[int, int],
+        nis_rows: list[list[float]],
+    ) -> None:
+        """Strong objects that no track explains start tracks."""
+        cfg = self.cfg
+        g3 = self._g3
+        n_live = len(nis_rows)
         for b, (trk, obj, s, _r, z) in enumerate(cands):
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
                 continue
@@ -501,7 +506,7 @@ class MultiTracker:
                 continue
             if any(
                 nis_rows[a][b] <= g3 and not self._apart(a, b, took, cands)
-                for a in range(len(live))
+                for a in range(n_live)
             ):
                 continue
             x0, P0 = object_start(obj, self.profile, flat_start)
@@ -509,7 +514,6 @@ class MultiTracker:
             tr.followed = trk.track_id
             tr.last_radar_t = t
             tr.score = s
-        self._merge(t)
 
     def _old_enough(self, obj: RadarObject, t: float) -> bool:
         """Whether a strong object has been seen long enough to start a track: for
@@ -600,98 +604,10 @@ class MultiTracker:
         return tr.last_radar_t is not None and t - tr.last_radar_t <= self.settings.merge_s
 
     # --- RF -----------------------------------------------------------------------------------
+
     def process_rf(self, att: RfAttempt) -> None:
-        if not att.ok or not math.isfinite(att.t + att.e + att.n):
-            return
-        t = att.t
-        self._count("rf_fixes")
-        max_cep = self.profile.rf_max_cep_m
-        if max_cep is not None and att.cep is not None and att.cep > max_cep:
-            self._count("rejected_cep")
-            return
-        r = self.rf_r.r_for(att.cep, att.valid_sensors)
-        z = (att.e, att.n)
-        em = emitter_key(att.center_freq_hz)
-        self.objects.rf_fix(t, att.e, att.n, 0.5 * (r[0] + r[2]), em)
-        self._advance(t)
-        own = [tr for tr in self.tracks if tr.emitter == em and tr.t <= t]
-        tentative_only = not self.settings.tentative_takes_radar and all(
-            not tr.confirmed for tr in own
-        )
-        if own and not tentative_only:
-            tr = min(own, key=lambda x: (not x.confirmed, x.id))
-            self._rf_to(tr, t, z, r)
-            return
-        free = [
-            (tr.filter.nis(z, r), tr.id, tr)
-            for tr in self.tracks
-            if tr.emitter is None and tr.confirmed and tr.t <= t
-        ]
-        free = [e for e in free if e[0] <= self._g2]
-        if free:
-            _, _, tr = min(free, key=lambda e: (e[0], e[1]))
-            tr.emitter = em
-            tr.emitter_misses = 0
-            self._count("emitter_linked")
-            for o in own:  # the emitter's tentative track: the confirmed track took over
-                self._drop(o, "emitter_linked")
-            self._rf_to(tr, t, z, r)
-            return
-        if own:
-            self._rf_to(min(own, key=lambda x: x.id), t, z, r)
-            return
-        tr = self._rf_start(t, z, r)
-        tr.emitter = em
-
-    def _rf_start(self, t: float, z: tuple[float, float], r: PackedR) -> UavTrack:
-        """A new track from an RF fix: at the fix, with the RF start's height prior, at rest
-        (the profile's velocity sigma); tentative (M of N) when the profile asks for it."""
-        p = self.profile
-        P = np.zeros((6, 6))
-        P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
-        P[2, 2] = p.rf_init_altitude_std_m**2
-        P[3, 3] = P[4, 4] = P[5, 5] = p.init_velocity_std_mps**2
-        tentative = p.confirm_m > 1
-        tr = self._new_track(t, [z[0], z[1], p.rf_init_altitude_m, 0.0, 0.0, 0.0], P, not tentative)
-        if tentative:
-            tr.mofn = MofN(p.confirm_m, p.confirm_n)
-        return tr
-
-    def _rf_to(self, tr: UavTrack, t: float, z: tuple[float, float], r: PackedR) -> None:
-        f = tr.filter
-        hold = self.profile.vz_hold_after_s
-        if hold is not None and (tr.last_radar_t is None or t - tr.last_radar_t > hold):
-            # no 3D measurement for a while: hold the climb rate near 0 (as the single-UAV
-            # tracker does) instead of letting a stale one run away
-            sd = self.profile.vz_hold_sigma_mps
-            f.update_scalar(5, 0.0, sd * sd)
-        n = f.nis(z, r)
-        hit = n <= self._g2
-        if hit:
-            w = self.robust.weight(n, 2)
-            f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
-            self._accept(tr, t)
-        if tr.mofn is not None:
-            state = tr.mofn.record(hit)
-            if state == "confirmed":
-                tr.confirmed = True
-                tr.mofn = None
-                self._count("confirmed")
-            elif state == "failed":
-                self._drop(tr, "unconfirmed")
-            return
-        if hit:
-            tr.emitter_misses = 0
-            return
-        tr.emitter_misses += 1
-        n_miss = self.settings.emitter_misses
-        if n_miss is not None and tr.emitter_misses >= n_miss:
-            # its emitter is elsewhere: the track took another UAV (or the emitter is a UAV
-            # on the ground); the emitter's next fix links anew
-            tr.emitter = None
-            tr.emitter_misses = 0
-            self._count("emitter_unlinked")
-        self._reject(tr)
+        """One RF attempt: to the track of its emitter (:mod:`.emitters`)."""
+        self.emitters.fix(att)
 
 
 class MultiGrid(EpochClock):

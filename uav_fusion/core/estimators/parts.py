@@ -131,6 +131,18 @@ def object_start(obj: RadarObject, profile: Profile, flat: bool) -> tuple[list[f
     return x, P
 
 
+def rf_start(z: tuple[float, ...], r: PackedR, profile: Profile) -> tuple[list[float], FloatArray]:
+    """A new track's state and covariance from an RF fix ``z`` with R ``r``: at the fix, at
+    the RF start's height prior (``rf_init_altitude_m`` +- ``rf_init_altitude_std_m``), at
+    rest within the profile's velocity sigma."""
+    x = [z[0], z[1], profile.rf_init_altitude_m, 0.0, 0.0, 0.0]
+    P = np.zeros((6, 6))
+    P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
+    P[2, 2] = profile.rf_init_altitude_std_m**2
+    P[3, 3] = P[4, 4] = P[5, 5] = profile.init_velocity_std_mps**2
+    return x, P
+
+
 class RadarFront:
     """The trackers' shared first stage of a radar frame (see the module text).
 
