@@ -112,11 +112,11 @@ from stonesoup.updater.kalman import KalmanUpdater
 
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import Profile, load_profile
-from uav_fusion.core.estimators.components import packed_to_array
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
 from uav_fusion.core.estimators.parts import (
     alignment_from_profile,
+    packed_to_array,
     radar_model_from_profile,
     rf_model_from_profile,
 )

@@ -21,8 +21,8 @@ from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.base import feed, make_estimator
 from uav_fusion.core.estimators.grid import StepGrid
-from uav_fusion.core.estimators.multi import MultiGrid, MultiTracker
 from uav_fusion.core.estimators.offline import run_tracker, smooth_steps
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import Tracker
@@ -241,15 +241,10 @@ def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
     frames, attempts, stream = flight_data
     site = load_site()
     profile = load_profile("tracker")
-    mt = MultiTracker(profile, site)
-    grid = MultiGrid(mt, 10.0)
+    est = make_estimator(profile, site, 10.0, kind="multi")
     expected = []
     for item in stream:
-        expected.extend(grid.before(item.t))
-        if isinstance(item, RadarFrame):
-            mt.process_radar_frame(item)
-        else:
-            mt.process_rf(item)
+        expected.extend(feed(est, item).tracks)
     rows = [(ep.t, f"track_{o.track_id}", o.x) for ep in expected for o in ep.tracks]
     assert len(rows) > 1000
     h = Harness(ctx, estimator="multi", idle_flush_s=0.0, stall_timeout_s=0.0)

@@ -13,13 +13,7 @@ import pytest
 from scipy.stats import chi2
 
 from uav_fusion.core.estimators import load_profile
-from uav_fusion.core.estimators.grid import (
-    GridEmitter,
-    StepGrid,
-    TrackSnapshot,
-    cv_predictor,
-    grid_from_steps,
-)
+from uav_fusion.core.estimators.grid import GridEmitter, StepGrid, TrackSnapshot, cv_predictor
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import kf_predict
 from uav_fusion.core.estimators.paper import FusionEstimator
@@ -30,6 +24,7 @@ from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
     ScoreSettings,
     epoch_errors,
+    grid_from_steps,
     nees,
     pool,
     score_grid,

@@ -16,11 +16,10 @@ import yaml
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import Profile, load_profile, run_flight
 from uav_fusion.core.estimators.base import feed
-from uav_fusion.core.estimators.components import FixedRadarR, RadarAlignment
 from uav_fusion.core.estimators.objects import ObjectTable, ScoreConfig
 from uav_fusion.core.estimators.offline import run_tracker
-from uav_fusion.core.estimators.steps import TrackerStep
-from uav_fusion.core.estimators.tracker import Tracker
+from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
+from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import Site, load_site
 
@@ -172,7 +171,7 @@ def test_tracker_profiles_load_and_round_trip() -> None:
 
 
 def test_an_imm_profile_runs_and_round_trips(tmp_path: Path, site: Site) -> None:
-    from uav_fusion.core.estimators.filters import ImmFilter
+    from uav_fusion.core.estimators.imm import ImmFilter
     from uav_fusion.core.estimators.profile import profile_from_dict
 
     f = _edit_tracker(tmp_path, lambda d: d.update(motion=_imm()))

@@ -223,8 +223,7 @@ def write_grid(
     steps: list[Step], flight: Flight, profile: Profile, site: Site, path: str, hz: float
 ) -> None:
     """The run's fixed-rate output over the truth's span (the steps' span without truth)."""
-    from uav_fusion.core.estimators.grid import grid_from_steps
-    from uav_fusion.core.scoring.fixed_rate import FlightTruth
+    from uav_fusion.core.scoring.fixed_rate import FlightTruth, grid_from_steps
 
     if not (math.isfinite(hz) and hz > 0):
         raise ConfigError(f"--grid-hz must be > 0, got {hz}")

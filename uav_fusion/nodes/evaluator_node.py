@@ -64,9 +64,8 @@ from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
 from uav_fusion.core.errors import UavFusionError
-from uav_fusion.core.estimators.grid import on_grid
 from uav_fusion.core.scoring.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
-from uav_fusion.core.scoring.fixed_rate import GridScore
+from uav_fusion.core.scoring.fixed_rate import GridScore, on_grid
 from uav_fusion.core.scoring.outcomes import MultiScore, multi_summary
 from uav_fusion.core.scoring.published import (
     gap_text,

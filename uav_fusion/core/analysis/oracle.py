@@ -68,21 +68,21 @@ from uav_fusion.core.bench.multi import (
     pool_multi,
 )
 from uav_fusion.core.bench.single import ScoreTask, score_task
-from uav_fusion.core.estimators.components import scale_packed
 from uav_fusion.core.estimators.emitters import emitter_key
-from uav_fusion.core.estimators.grid import Grid, grid_from_published
 from uav_fusion.core.estimators.kalman import PackedR
 from uav_fusion.core.estimators.multi import MultiTracker, UavTrack, run_multi
 from uav_fusion.core.estimators.multi_settings import MultiSettings
 from uav_fusion.core.estimators.objects import RadarObject
-from uav_fusion.core.estimators.parts import object_start
+from uav_fusion.core.estimators.parts import object_start, scale_packed
 from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
+    Grid,
     GridSamples,
     epoch_errors,
+    grid_from_published,
     observable_epochs,
     pool,
     score_grid,
@@ -368,7 +368,7 @@ def _run_single_pair(
         t1,
         profile.max_coast_s,
     )
-    align = oracle.alignment.point if oracle.alignment is not None else None
+    align = oracle.front.align.point if oracle.front.align is not None else None
     return ours, stream, grid, align
 
 

@@ -36,8 +36,8 @@ from uav_fusion.core.estimators.selection import (
     frames_input,
     largest_track_id,
 )
-from uav_fusion.core.estimators.steps import STATUSES, Step, TrackerStep
-from uav_fusion.core.estimators.tracker import Tracker, TrackEstimate
+from uav_fusion.core.estimators.steps import STATUSES, Step
+from uav_fusion.core.estimators.tracker import Tracker, TrackerStep, TrackEstimate
 
 __all__ = [
     "ESTIMATORS",

@@ -18,9 +18,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from uav_fusion.core.estimators.components import MofN, scale_packed
 from uav_fusion.core.estimators.kalman import PackedR
-from uav_fusion.core.estimators.parts import rf_start
+from uav_fusion.core.estimators.parts import MofN, rf_start, scale_packed
 from uav_fusion.core.records import RfAttempt
 
 if TYPE_CHECKING:

@@ -34,16 +34,14 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from uav_fusion.core.estimators.components import scale_packed
-from uav_fusion.core.estimators.filters import CvFilter, MotionFilter
-from uav_fusion.core.estimators.kalman import PackedR
+from uav_fusion.core.estimators.kalman import CvFilter, MotionFilter, PackedR
 from uav_fusion.core.estimators.objects import RadarObject
-from uav_fusion.core.estimators.parts import object_start
-from uav_fusion.core.estimators.steps import DISCARDED, TrackerStep
+from uav_fusion.core.estimators.parts import object_start, scale_packed
+from uav_fusion.core.estimators.steps import DISCARDED
 from uav_fusion.core.records import RADAR, RadarTrack
 
 if TYPE_CHECKING:
-    from uav_fusion.core.estimators.tracker import Tracker
+    from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
 
 # a candidate report of a frame: (index in the frame, report, its object, the object's score,
 # z, R, NIS against the track, inside the gate)

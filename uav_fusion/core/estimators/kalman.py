@@ -24,7 +24,9 @@ floating-point operations in the same order, so the same results, with less inte
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -380,3 +382,159 @@ class CvKalman:
             p55 - (h05 * v05 + h15 * v15),
         ]
         return nis
+
+
+# --- the motion filter a track runs: the CV model (an IMM of CV models: imm.py) -------------
+Q3 = tuple[float, float, float]
+_PAIRS = tuple((i, j) for i in range(6) for j in range(i, 6))
+_PI = tuple(i for i, _ in _PAIRS)
+_PJ = tuple(j for _, j in _PAIRS)
+_UNIT = tuple(tuple(1.0 if i == k else 0.0 for i in range(6)) for k in range(6))
+
+
+class MotionFilter(Protocol):
+    """What the tracker needs from a motion filter (CV or IMM)."""
+
+    def set_state(self, x: FloatArray | Sequence[float], P: FloatArray) -> None: ...
+    def predict(self, T: float) -> None: ...
+    def nis(self, z: Sequence[float], r: PackedR) -> float: ...
+    def update(self, z: Sequence[float], r: PackedR) -> float: ...
+    def mean(self) -> tuple[list[float], list[float]]: ...
+    def copy(self) -> MotionFilter: ...
+    def mode_probabilities(self) -> tuple[float, ...]: ...
+    def effective_q(self) -> Q3: ...
+    def update_scalar(self, idx: int, value: float, var: float) -> None: ...
+    def update_linear(self, h: Sequence[float], value: float, var: float) -> None: ...
+
+
+def _nis(kf: CvKalman, z: Sequence[float], r: PackedR) -> float:
+    if len(z) == 3:
+        return kf.nis3(z[0], z[1], z[2], r)
+    return kf.nis2(z[0], z[1], r)
+
+
+def _update(kf: CvKalman, z: Sequence[float], r: PackedR) -> float:
+    if len(z) == 3:
+        return kf.update3(z[0], z[1], z[2], r)
+    return kf.update2(z[0], z[1], r)
+
+
+def update_scalar(kf: CvKalman, idx: int, value: float, var: float) -> None:
+    """Update with a scalar pseudo-measurement of state element ``idx`` (variance ``var``):
+    :func:`update_linear` with ``h = e_idx`` (``K = P e_i / (P_ii + var)``)."""
+    update_linear(kf, _UNIT[idx], value, var)
+
+
+def update_linear(kf: CvKalman, h: Sequence[float], value: float, var: float) -> None:
+    """Update with a scalar pseudo-measurement ``h . x`` (``h`` over the 6 state elements,
+    variance ``var``): ``K = P h / (h^T P h + var)``, ``x += K (value - h . x)``,
+    ``P -= K K^T (h^T P h + var)``."""
+    p = kf.P
+    col = [sum(p[UPPER_INDEX[a][b]] * h[b] for b in range(6) if h[b]) for a in range(6)]
+    s = sum(h[a] * col[a] for a in range(6)) + var
+    y = value - sum(h[a] * kf.x[a] for a in range(6))
+    kf.x = [xa + ca * y / s for xa, ca in zip(kf.x, col, strict=True)]
+    kf.P = [pv - col[i] * col[j] / s for pv, i, j in zip(p, _PI, _PJ, strict=True)]
+
+
+class CvFilter:
+    """One constant-velocity model (the paper's filter as a :class:`MotionFilter`)."""
+
+    __slots__ = ("kf",)
+
+    def __init__(self, q: Q3) -> None:
+        self.kf = CvKalman(q)
+
+    def set_state(self, x: FloatArray | Sequence[float], P: FloatArray) -> None:
+        self.kf.set_state(x, P)
+
+    def predict(self, T: float) -> None:
+        self.kf.predict(T)
+
+    def nis(self, z: Sequence[float], r: PackedR) -> float:
+        return _nis(self.kf, z, r)
+
+    def update(self, z: Sequence[float], r: PackedR) -> float:
+        return _update(self.kf, z, r)
+
+    def mean(self) -> tuple[list[float], list[float]]:
+        return self.kf.x, self.kf.P
+
+    def copy(self) -> CvFilter:
+        c = CvFilter(self.kf.q)
+        c.kf.x = list(self.kf.x)
+        c.kf.P = list(self.kf.P)
+        return c
+
+    def mode_probabilities(self) -> tuple[float, ...]:
+        return (1.0,)
+
+    def update_scalar(self, idx: int, value: float, var: float) -> None:
+        update_scalar(self.kf, idx, value, var)
+
+    def update_linear(self, h: Sequence[float], value: float, var: float) -> None:
+        update_linear(self.kf, h, value, var)
+
+    def effective_q(self) -> Q3:
+        return self.kf.q
+
+
+# --- quadratic forms on packed covariances (the multi-UAV tracker's costs) -------------------
+def velocity_nis(
+    x: list[float], p: list[float], vel_ned: tuple[float, float, float] | None, s2: float
+) -> float:
+    """NIS (3 dof) of a reported NED velocity against the velocity of the state ``x`` whose
+    6x6 covariance is packed in ``p`` (upper triangle by rows), plus ``s2`` on each axis; 0
+    for a report without a velocity or a singular sum."""
+    if vel_ned is None:
+        return 0.0
+    q = quad3(
+        vel_ned[1] - x[3], vel_ned[0] - x[4], -vel_ned[2] - x[5],
+        p[15] + s2, p[16], p[17], p[18] + s2, p[19], p[20] + s2,
+    )  # fmt: skip
+    return 0.0 if q is None else q
+
+
+def merge_nis(
+    xa: list[float], pa: list[float], xb: list[float], pb: list[float], k: int
+) -> float | None:
+    """Squared Mahalanobis distance of two states' positions (the first ``k`` = 2 or 3 axes)
+    on the sum of their covariances (packed upper triangles); None when the sum is
+    singular."""
+    d0 = xa[0] - xb[0]
+    d1 = xa[1] - xb[1]
+    s00 = pa[0] + pb[0]
+    s01 = pa[1] + pb[1]
+    s11 = pa[6] + pb[6]
+    if k == 2:
+        det = s00 * s11 - s01 * s01
+        if det == 0.0:
+            return None
+        q = (d0 * (s11 * d0 - s01 * d1) + d1 * (s00 * d1 - s01 * d0)) / det
+        return q if math.isfinite(q) else None
+    return quad3(
+        d0, d1, xa[2] - xb[2], s00, s01, pa[2] + pb[2], s11, pa[7] + pb[7], pa[11] + pb[11]
+    )
+
+
+def quad3(
+    d0: float, d1: float, d2: float,
+    s00: float, s01: float, s02: float, s11: float, s12: float, s22: float,
+) -> float | None:  # fmt: skip
+    """``d^T S^-1 d`` for a symmetric 3x3 ``S`` (upper triangle), by its adjugate; None when
+    ``S`` is singular or the result is not finite."""
+    i00 = s11 * s22 - s12 * s12
+    i01 = s02 * s12 - s01 * s22
+    i02 = s01 * s12 - s02 * s11
+    det = s00 * i00 + s01 * i01 + s02 * i02
+    if det == 0.0:
+        return None
+    i11 = s00 * s22 - s02 * s02
+    i12 = s01 * s02 - s00 * s12
+    i22 = s00 * s11 - s01 * s01
+    q = (
+        d0 * (i00 * d0 + i01 * d1 + i02 * d2)
+        + d1 * (i01 * d0 + i11 * d1 + i12 * d2)
+        + d2 * (i02 * d0 + i12 * d1 + i22 * d2)
+    ) / det
+    return q if math.isfinite(q) else None

@@ -1,65 +1,42 @@
 """Several UAVs at once: every confirmed UAV track with a stable id and a UAV probability.
 
-Built from the single-UAV tracker's parts (:mod:`~uav_fusion.core.estimators.tracker`): the
-profile's motion filter, measurement models, robust weight, NIS gate, deleter and M-of-N
-confirmation, and the radar object table with its UAV score
-(:mod:`~uav_fusion.core.estimators.objects`), which already follows every radar object.
-The score reads a young radar track's class for its age as the single-UAV tracker does (the
-profile's ``association.class.prior_logit``; ``MultiSettings.class_by_age`` False reads each
-report's class as it is; docs/estimator.md, "A young radar track's class"), and, while the
-radar track is young, for its range too (``class_range_scale_m``, ``class_range_age_s``).
-Its own settings (:class:`~uav_fusion.core.estimators.multi_settings.MultiSettings`) are the
-profile's ``multi`` section (``config/profiles/README.md``, "Multi-UAV keys"); a ``settings``
-argument given to :class:`MultiTracker` replaces them.
+It composes the parts it shares with the single-UAV tracker
+(:mod:`~uav_fusion.core.estimators.parts`: the radar front-end with the radar object table and
+its UAV score, the measurement models, the robust weight, the NIS gates, the deleter and M-of-N
+confirmation) and routes RF fixes by emitter (:mod:`~uav_fusion.core.estimators.emitters`).
+The score reads a young radar track's class for its age, and, while the radar track is young,
+for its range too (``class_range_scale_m``, ``class_range_age_s``). Its own settings are the
+profile's ``multi`` section (``config/profiles/README.md``); a ``settings`` argument given to
+:class:`MultiTracker` replaces them.
 
 Per radar frame (one time for all reports):
 
-1. every finite report updates its radar object; reports beyond the range gate (or, with
-   ``far_gate_m``, beyond the far gate), coasted reports (with
-   ``association.object.skip_radar_coasts``) and reports of objects scoring below ``follow_min``
-   are not candidates, except for one track: an object scoring at least
-   ``emitter_follow_min`` whose last RF credit came from an emitter (its
-   :attr:`~uav_fusion.core.estimators.objects.RadarObject.rf_key`, still supported) may
-   update the track carrying that emitter (a young radar track on an emitting UAV, its class
-   not yet built up, where the emitter's own fix put it); a candidate between the range gate
-   and the far gate, or below the ground (``flat_below_ground``), is horizontal only: it may
-   update a track (its climb rate held near zero first); one below the ground never starts a
-   track, one beyond the range gate may (step 4), with the RF start's height prior
-   (``rf_init_altitude_m``, ``rf_init_altitude_std_m``) and no climb;
+1. every finite report updates its radar object; the candidates are the reports inside the
+   range gate (horizontal only between it and the far gate, or below the ground with
+   ``flat_below_ground``), not coasting, of objects scoring at least ``follow_min`` (or at
+   least ``emitter_follow_min`` for the track carrying the emitter whose fix last credited
+   the object: a young radar track on an emitting UAV);
 2. every track is predicted to the frame's time (the deleter drops a track whose last
    accepted measurement is older than ``max_coast_s``);
-3. tracks and candidates are assigned one to one (global nearest neighbour: Hungarian
-   assignment on the position NIS plus ``velocity_weight`` times the NIS of the velocity the
-   radar reports for its track against the track's velocity (two UAVs crossing are close
-   in position but not in velocity), less ``continuity_bonus`` for the radar object the
-   track took last (0 by default: the radar's own tracker swaps ids at crossings);
-   pairs outside the NIS gate forbidden. Unlike the single-UAV tracker the UAV score is not
-   in the cost: it tells a UAV from clutter, not one UAV from another); an assigned report
-   updates its track (robust weight); a confirmed track whose own radar object reported
-   outside its gate counts a rejection (``max_consecutive_rejections`` drop it);
+3. tracks and candidates are assigned one to one (Hungarian assignment on the position NIS
+   plus ``velocity_weight`` times the NIS of the radar's reported velocity against the
+   track's, less ``continuity_bonus`` for the radar object the track took last; pairs
+   outside the NIS gate forbidden; the UAV score is not in the cost: it tells a UAV from
+   clutter, not one UAV from another); an assigned report updates its track (robust
+   weight); a confirmed track whose own radar object reported outside its gate counts a
+   rejection;
 4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
-   ``init_min_reports`` reports), has been seen for ``birth_age_s`` (default: the score's
-   ``stationary_min_age_s``, so that the stationary-clutter cue has had its chance), or for
-   ``early_birth_age_s`` while its mean speed is at least ``early_birth_speed_mps`` (it is
-   not standing still, so that cue has nothing to say), or has RF support, and lies outside
-   the gate of every track starts a new confirmed track from its object's state (a report
-   beyond the range gate, or under the ground and so used on east / north only, starts it
-   at the RF start's height prior; one under the ground whose object is a ghost, its mean
-   height clearly below the ground, starts none);
+   ``init_min_reports`` reports), old enough (``birth_age_s``, or ``early_birth_age_s`` while
+   it moves at ``early_birth_speed_mps``, or with RF support) and outside every track's gate
+   starts a confirmed track from its object's state (at the RF start's height prior when it
+   has no usable height; never from a ghost below the ground);
 5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
    for ``merge_s`` are one UAV, unless both were updated within ``merge_s`` by different
    radar objects (two UAVs passing each other): the younger is dropped.
 
-An RF fix (``ok`` attempts) first credits the radar objects it agrees with. It belongs to its
-emitter, keyed by centre frequency: a track that has an emitter takes only that emitter's
-fixes (inside its gate: update; outside: a rejection, and after ``emitter_misses`` such
-fixes in a row the track loses the emitter: the link was wrong, e.g. made from a fix of a UAV
-still on its pad, and the emitter's next fix links anew); a fix of an emitter no track has yet
-goes to the nearest track without an emitter whose gate it falls in, which then carries that
-emitter; otherwise it starts a tentative track of that emitter, confirmed by M of N fixes as
-in the single-UAV tracker. A fix without a frequency is one emitter of its own ("unknown").
+RF fixes go to the track of their emitter (:mod:`~uav_fusion.core.estimators.emitters`).
 
-The output (:meth:`MultiTracker.outputs`, and so :class:`MultiGrid`) holds a confirmed track
+The output (:meth:`MultiTracker.outputs`, and so its fixed-rate epochs) holds a confirmed track
 while its last accepted measurement is at most ``output_coast_s`` old and, inside the radar's
 range gate, its last radar update at most ``radar_output_s`` old (3 s each; the track itself
 lives until the profile's ``max_coast_s``, so a UAV found again keeps its id): a track whose
@@ -82,22 +59,24 @@ import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
 from uav_fusion.core.estimators.base import drive
-from uav_fusion.core.estimators.components import (
-    MofN,
-    RadarAlignment,
-    scale_packed,
-)
 from uav_fusion.core.estimators.emitters import Emitters
-from uav_fusion.core.estimators.filters import MotionFilter
-from uav_fusion.core.estimators.grid import EpochClock, GridEpoch, GridState, Outputs, TrackOutput
-from uav_fusion.core.estimators.kalman import PackedR, expand_upper
+from uav_fusion.core.estimators.grid import GridEpoch, GridState, MultiGrid, Outputs, TrackOutput
+from uav_fusion.core.estimators.kalman import (
+    MotionFilter,
+    PackedR,
+    expand_upper,
+    merge_nis,
+    velocity_nis,
+)
 from uav_fusion.core.estimators.multi_settings import MultiSettings
 from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.estimators.parts import (
+    MofN,
     RadarFront,
     TrackParts,
     motion_filter_from_profile,
     object_start,
+    scale_packed,
 )
 from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
@@ -195,7 +174,7 @@ class MultiTracker:
         self._next_id = 1
         self.counters: dict[str, int] = {}
         self._args = (settings, grid_hz, t0, t1)
-        self.grid = MultiGrid(self, grid_hz, t0, t1)
+        self.grid = MultiGrid(self, grid_hz, t0, t1, profile.max_coast_s)
 
     # --- the estimator interface (uav_fusion.core.estimators.base) ----------------------
     def radar_frame(self, frame: RadarFrame) -> Outputs:
@@ -246,12 +225,6 @@ class MultiTracker:
             for o in ep.tracks[:1]
         ]  # fmt: skip
         return Outputs(grid=grid, tracks=epochs)
-
-    @property
-    def alignment(self) -> RadarAlignment | None:
-        """The radar's misalignment correction applied to every report before use (None:
-        the profile has none)."""
-        return self.front.align
 
     # --- output ---------------------------------------------------------------------------
     def _count(self, key: str, n: int = 1) -> None:
@@ -566,7 +539,7 @@ class MultiTracker:
                     continue
                 xb, pb = means[j]
                 # a track without a recent radar update has no altitude worth comparing
-                m = _merge_nis(xa, pa, xb, pb, 3 if recent[i] and recent[j] else 2)
+                m = merge_nis(xa, pa, xb, pb, 3 if recent[i] and recent[j] else 2)
                 if m is None:
                     continue
                 if m > st.merge_nis:
@@ -610,48 +583,6 @@ class MultiTracker:
         self.emitters.fix(att)
 
 
-class MultiGrid(EpochClock):
-    """The confirmed tracks at every grid epoch ``k / frequency_hz``, emitted as processed time
-    passes it (the same for a live node and an offline run): call :meth:`before` with an
-    item's time before feeding the item to the tracker, :meth:`advance` when everything up to
-    a time has been processed. Each track the tracker publishes (:meth:`MultiTracker.outputs`)
-    is predicted to the epoch, while its last accepted measurement is at most the profile's
-    ``max_coast_s`` old. No epoch before ``t0`` (default: the first time seen) or after
-    ``t1``."""
-
-    def __init__(
-        self,
-        tracker: MultiTracker,
-        frequency_hz: float,
-        t0: float | None = None,
-        t1: float | None = None,
-    ) -> None:
-        super().__init__(frequency_hz, t0, t1)
-        self.tracker = tracker
-        self.max_coast_s = tracker.profile.max_coast_s
-
-    def _epochs(self, ks: list[int]) -> list[GridEpoch]:
-        out: list[GridEpoch] = []
-        mc = self.max_coast_s
-        for k in ks:
-            g = self.epoch_time(k)
-            tracks = tuple(
-                o
-                for o in self.tracker.outputs(g)
-                if o.t <= g and (mc is None or g - o.last_update_t <= mc)
-            )
-            out.append(GridEpoch(g, tracks))
-        return out
-
-    def before(self, t: float) -> list[GridEpoch]:
-        """An item at ``t`` is about to be processed: every epoch before ``t``."""
-        return self._epochs(self.take(t, inclusive=False))
-
-    def advance(self, t: float) -> list[GridEpoch]:
-        """Everything up to ``t`` has been processed: every epoch up to ``t``."""
-        return self._epochs(self.take(t, inclusive=True))
-
-
 def run_multi(
     tracker: MultiTracker,
     stream: list[RadarFrame | RfAttempt],
@@ -661,65 +592,5 @@ def run_multi(
 ) -> list[GridEpoch]:
     """Drive ``tracker`` over ``stream`` (time order) with its output at ``grid_hz`` on
     ``[t_start, t_end]``: its confirmed tracks at every epoch."""
-    tracker.grid = MultiGrid(tracker, grid_hz, t_start, t_end)
+    tracker.grid = MultiGrid(tracker, grid_hz, t_start, t_end, tracker.profile.max_coast_s)
     return drive(tracker, stream, t_end).tracks
-
-
-def velocity_nis(
-    x: list[float], p: list[float], vel_ned: tuple[float, float, float] | None, s2: float
-) -> float:
-    """NIS (3 dof) of a reported NED velocity against the velocity of the state ``x`` whose
-    6x6 covariance is packed in ``p`` (upper triangle by rows), plus ``s2`` on each axis; 0
-    for a report without a velocity or a singular sum."""
-    if vel_ned is None:
-        return 0.0
-    q = _quad3(
-        vel_ned[1] - x[3], vel_ned[0] - x[4], -vel_ned[2] - x[5],
-        p[15] + s2, p[16], p[17], p[18] + s2, p[19], p[20] + s2,
-    )  # fmt: skip
-    return 0.0 if q is None else q
-
-
-def _merge_nis(
-    xa: list[float], pa: list[float], xb: list[float], pb: list[float], k: int
-) -> float | None:
-    """Squared Mahalanobis distance of two states' positions (the first ``k`` = 2 or 3 axes)
-    on the sum of their covariances (packed upper triangles); None when the sum is
-    singular."""
-    d0 = xa[0] - xb[0]
-    d1 = xa[1] - xb[1]
-    s00 = pa[0] + pb[0]
-    s01 = pa[1] + pb[1]
-    s11 = pa[6] + pb[6]
-    if k == 2:
-        det = s00 * s11 - s01 * s01
-        if det == 0.0:
-            return None
-        q = (d0 * (s11 * d0 - s01 * d1) + d1 * (s00 * d1 - s01 * d0)) / det
-        return q if math.isfinite(q) else None
-    return _quad3(
-        d0, d1, xa[2] - xb[2], s00, s01, pa[2] + pb[2], s11, pa[7] + pb[7], pa[11] + pb[11]
-    )
-
-
-def _quad3(
-    d0: float, d1: float, d2: float,
-    s00: float, s01: float, s02: float, s11: float, s12: float, s22: float,
-) -> float | None:  # fmt: skip
-    """``d^T S^-1 d`` for a symmetric 3x3 ``S`` (upper triangle), by its adjugate; None when
-    ``S`` is singular or the result is not finite."""
-    i00 = s11 * s22 - s12 * s12
-    i01 = s02 * s12 - s01 * s22
-    i02 = s01 * s12 - s02 * s11
-    det = s00 * i00 + s01 * i01 + s02 * i02
-    if det == 0.0:
-        return None
-    i11 = s00 * s22 - s02 * s02
-    i12 = s01 * s02 - s00 * s12
-    i22 = s00 * s11 - s01 * s01
-    q = (
-        d0 * (i00 * d0 + i01 * d1 + i02 * d2)
-        + d1 * (i01 * d0 + i11 * d1 + i12 * d2)
-        + d2 * (i02 * d0 + i12 * d1 + i22 * d2)
-    ) / det
-    return q if math.isfinite(q) else None

@@ -71,10 +71,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from uav_fusion.core.estimators.components import RadarRModel
 from uav_fusion.core.estimators.kalman import CvKalman, PackedR
 from uav_fusion.core.records import RadarTrack
+
+if TYPE_CHECKING:
+    from uav_fusion.core.estimators.parts import RadarRModel
 
 RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
 

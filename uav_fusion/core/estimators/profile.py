@@ -22,7 +22,7 @@ import numpy.typing as npt
 
 from uav_fusion.core.data.uav_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.components import validate_transition
+from uav_fusion.core.estimators.imm import validate_transition
 from uav_fusion.core.estimators.inherit import profile_path, resolve
 from uav_fusion.core.estimators.keys import MULTI, PAPER, TRACKER, Key, check, convert
 from uav_fusion.core.estimators.multi_settings import MultiSettings

@@ -40,20 +40,17 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from uav_fusion.core.estimators.components import (
-    MofN,
-    scale_packed,
-)
-from uav_fusion.core.estimators.filters import MotionFilter
 from uav_fusion.core.estimators.follow import RadarFollower
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
-from uav_fusion.core.estimators.kalman import PackedR, expand_cov3, expand_upper
+from uav_fusion.core.estimators.kalman import MotionFilter, PackedR, expand_cov3, expand_upper
 from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.estimators.parts import (
+    MofN,
     RadarFront,
     TrackParts,
     motion_filter_from_profile,
     rf_start,
+    scale_packed,
 )
 from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
@@ -66,7 +63,6 @@ from uav_fusion.core.estimators.steps import (
     TENTATIVE,
     UPDATED,
     Step,
-    TrackerStep,
 )
 from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
@@ -77,6 +73,69 @@ _pack = struct.Struct("27d").pack
 _NAN_STATE = _pack(*(math.nan,) * 27)
 # a filter's (x, P) lists with their packed bytes, mode probabilities and effective q
 _Packed = tuple[object, object, bytes, tuple[float, ...], tuple[float, float, float]]
+
+class TrackerStep(Step):
+    """A :class:`Step` with the measurement, its object's UAV score, the robust weight, the
+    IMM mode probabilities and the track segment (a new one starts at every track start)."""
+
+    __slots__ = ("mode_probs", "q_eff", "score", "segment", "weight", "z")
+
+    def __init__(
+        self,
+        t: float,
+        source: str,
+        status: str,
+        reason: str | None,
+        nis: float | None,
+        state: bytes,
+        dim: int,
+        track_id: int | None,
+        seq: int,
+        z: tuple[float, ...],
+        score: float | None,
+        weight: float | None,
+        mode_probs: tuple[float, ...],
+        segment: int,
+        q_eff: tuple[float, float, float],
+    ) -> None:
+        self.t = t
+        self.source = source
+        self.status = status
+        self.reason = reason
+        self.nis = nis
+        self._state = state
+        self._x = None
+        self._P = None
+        self.dim = dim
+        self.track_id = track_id
+        self.seq = seq
+        self.z = z
+        self.score = score
+        self.weight = weight
+        self.mode_probs = mode_probs
+        self.segment = segment
+        self.q_eff = q_eff
+
+    def with_state(self, state: bytes) -> TrackerStep:
+        """A copy with another packed state (x then the upper triangle of P)."""
+        return TrackerStep(
+            self.t,
+            self.source,
+            self.status,
+            self.reason,
+            self.nis,
+            state,
+            self.dim,
+            self.track_id,
+            self.seq,
+            self.z,
+            self.score,
+            self.weight,
+            self.mode_probs,
+            self.segment,
+            self.q_eff,
+        )
+
 
 @dataclass(frozen=True)
 class TrackEstimate:

@@ -20,8 +20,12 @@ import numpy.typing as npt
 
 from uav_fusion.core.data import fmt_utc, load_flight
 from uav_fusion.core.data.encoding import time_to_ns
-from uav_fusion.core.estimators.grid import grid_from_published
-from uav_fusion.core.scoring.fixed_rate import FlightTruth, GridScore, score_grid
+from uav_fusion.core.scoring.fixed_rate import (
+    FlightTruth,
+    GridScore,
+    grid_from_published,
+    score_grid,
+)
 from uav_fusion.core.scoring.fixed_rate import pool as pool_grid
 from uav_fusion.core.scoring.gospa import (
     MultiScoreSettings,
