@@ -17,9 +17,9 @@ from uav_fusion.core.estimators.grid import GridEmitter, StepGrid, TrackSnapshot
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import kf_predict
 from uav_fusion.core.estimators.paper import FusionEstimator
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.estimators.synthetic import simulate_stream
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
     ScoreSettings,

@@ -20,7 +20,7 @@ from uav_fusion.core.estimators.parts import (
     radar_model_from_profile,
     rf_model_from_profile,
 )
-from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 

@@ -10,8 +10,8 @@ import sys
 import numpy as np
 
 from uav_fusion.core.estimators.grid import Outputs
-from uav_fusion.core.estimators.profile import load_profile
 from uav_fusion.core.live.pipeline import Pipeline, PipelineConfig
+from uav_fusion.core.profiles.model import load_profile
 from uav_fusion.core.records import RADAR, RF, Measurement, RadarFrame, RadarTrack, RfAttempt
 
 T0 = 1.7e9

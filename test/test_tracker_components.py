@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
-from uav_fusion.core.estimators.imm import ImmFilter, packed_arrays, validate_transition
+from uav_fusion.core.estimators.imm import ImmFilter, packed_arrays
 from uav_fusion.core.estimators.kalman import CvFilter, pack_r
 from uav_fusion.core.estimators.models import (
     cv_process_noise,
@@ -29,6 +29,7 @@ from uav_fusion.core.estimators.parts import (
     StudentTWeight,
     packed_to_array,
 )
+from uav_fusion.core.profiles.checks import validate_transition
 from uav_fusion.core.records import RadarFrame, RadarTrack
 
 RAD = math.radians

@@ -8,8 +8,8 @@ import time
 from pathlib import Path
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import Step
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path

@@ -71,11 +71,11 @@ from uav_fusion.core.bench.single import ScoreTask, score_task
 from uav_fusion.core.estimators.emitters import emitter_key
 from uav_fusion.core.estimators.kalman import PackedR
 from uav_fusion.core.estimators.multi import MultiTracker, UavTrack, run_multi
-from uav_fusion.core.estimators.multi_settings import MultiSettings
 from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.estimators.parts import object_start, scale_packed
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.profiles.model import Profile
+from uav_fusion.core.profiles.settings import MultiSettings
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,

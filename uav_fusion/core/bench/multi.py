@@ -48,8 +48,8 @@ from uav_fusion.core.bench.cache import CachedFlight, read_vehicle_labels
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import Flight
 from uav_fusion.core.scoring.gospa import (
     MultiScoreSettings,

@@ -14,7 +14,7 @@ from uav_fusion.core.bench.definition import BenchDefinition
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators.offline import run_flight
-from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
     GridSamples,

@@ -36,7 +36,6 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimators.kalman import CvKalman
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import (
     COASTED,
     DISCARDED,
@@ -46,6 +45,7 @@ from uav_fusion.core.estimators.steps import (
     USED,
     Step,
 )
+from uav_fusion.core.profiles.model import Profile
 
 FloatArray = npt.NDArray[np.float64]
 Predict = Callable[[FloatArray, FloatArray, float], tuple[FloatArray, FloatArray]]

@@ -228,24 +228,3 @@ class ImmFilter:
 def packed_arrays(x: Sequence[float], p: Sequence[float]) -> tuple[FloatArray, FloatArray]:
     """(x (6,), P (6, 6)) arrays from packed lists."""
     return np.array(x, dtype=float), expand_upper(p)
-
-
-def validate_transition(m: object, n_modes: int, where: str) -> tuple[tuple[float, ...], ...]:
-    """A Markov transition matrix: ``n_modes`` x ``n_modes``, entries in [0, 1], rows summing
-    to 1 (within 1e-9). Raises ValueError naming ``where`` and the fault."""
-    try:
-        a = np.asarray(m, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: must be a {n_modes}x{n_modes} matrix of numbers") from None
-    if a.shape != (n_modes, n_modes):
-        raise ValueError(f"{where}: must be {n_modes}x{n_modes} (one row per mode), got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{where}: entries must be finite")
-    if np.any(a < 0) or np.any(a > 1):
-        raise ValueError(f"{where}: entries must lie in [0, 1]")
-    sums = a.sum(axis=1)
-    bad = np.flatnonzero(np.abs(sums - 1.0) > 1e-9)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(f"{where}: row {i} sums to {sums[i]:.12g}, not 1")
-    return tuple(tuple(float(v) for v in row) for row in a)

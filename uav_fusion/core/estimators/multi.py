@@ -68,7 +68,6 @@ from uav_fusion.core.estimators.kalman import (
     merge_nis,
     velocity_nis,
 )
-from uav_fusion.core.estimators.multi_settings import MultiSettings
 from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.estimators.parts import (
     MofN,
@@ -78,9 +77,10 @@ from uav_fusion.core.estimators.parts import (
     object_start,
     scale_packed,
 )
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.steps import Step
+from uav_fusion.core.profiles.model import Profile
+from uav_fusion.core.profiles.settings import MultiSettings
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
 

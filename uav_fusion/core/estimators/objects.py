@@ -70,75 +70,16 @@ its last report that was not a coast, :attr:`RadarObject.kf_t`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from uav_fusion.core.estimators.kalman import CvKalman, PackedR
+from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import RadarTrack
 
 if TYPE_CHECKING:
     from uav_fusion.core.estimators.parts import RadarRModel
 
 RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
-
-
-@dataclass(frozen=True)
-class ScoreConfig:
-    """Weights and thresholds of the UAV score: a profile's ``association`` groups (each key
-    and the field it sets: :mod:`~uav_fusion.core.estimators.schema`)."""
-
-    class_weight: float = 1.0
-    class_tau_s: float = 8.0
-    class_clip: float = 3.0
-    stationary_speed_mps: float = 1.5
-    stationary_min_age_s: float = 8.0
-    stationary_weight: float = 5.0
-    ground_alt_m: float = 4.0
-    ground_weight: float = 3.0
-    ground_release_sigmas: float = 0.0
-    vehicle_min_rcs_dbsm: float = -100.0  # -100: every low moving object may be a vehicle
-    below_ground_m: float = 5.0
-    below_ground_weight: float = 8.0
-    below_ground_sigmas: float = 0.0
-    erratic_nis: float = 6.0
-    bird_rcs_dbsm: float = -15.0
-    erratic_weight: float = 2.0
-    large_rcs_dbsm: float = 100.0  # 100: off
-    large_rcs_weight: float = 5.0
-    rf_weight: float = 1.0
-    rf_tau_s: float = 30.0
-    rf_max: float = 3.0
-    rf_window_s: float = 3.0
-    rf_support_max_cep_m: float = 0.0
-    rf_memory_s: float = 0.0
-    fused_weight: float = 1.5
-    fused_tau_s: float = 10.0
-    fused_nis: float = 3.0
-    lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
-    reach_margin_m: float = 0.0  # single-UAV tracker: 0: no reach gate (Tracker._reachable)
-    age_weight: float = 0.5
-    age_full_s: float = 10.0
-    object_q: float = 5.0
-    object_floor_m: float = 10.0
-    speed_tau_s: float = 5.0
-    follow_min: float = 0.0
-    init_min: float = 1.0
-    init_min_reports: int = 4
-    skip_radar_coasts: bool = False
-    rf_nearest_only: bool = False
-    challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
-    challenge_margin: float = 0.5
-    # a young radar track's class output leans to the classifier's prior (module text); None:
-    # every report's logit taken as it is
-    class_prior_logit: float | None = None
-    class_age_tau_s: float = 4.0
-    class_min_weight: float = 0.4
-    # ... and, while the object is younger than class_range_age_s, for its range: the weight is
-    # also multiplied by exp(-range / class_range_scale_m) (0: off). Not profile keys: the
-    # multi-UAV tracker sets them (MultiSettings); module text
-    class_range_scale_m: float = 0.0
-    class_range_age_s: float = 0.0
-
 
 
 def _ema(old: float, new: float, dt: float, tau: float) -> float:

@@ -44,7 +44,6 @@ import numpy.typing as npt
 
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
 from uav_fusion.core.estimators.kalman import CvKalman, PackedR, expand_cov3, pack_r
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import selected_input
 from uav_fusion.core.estimators.steps import (
     COASTED,
@@ -58,6 +57,7 @@ from uav_fusion.core.estimators.steps import (
     nis_gate,
     pack_state,
 )
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import (
     RADAR,
     RF,

@@ -37,9 +37,10 @@ import numpy.typing as npt
 
 from uav_fusion.core.estimators.imm import ImmFilter
 from uav_fusion.core.estimators.kalman import CvFilter, MotionFilter, PackedR, expand_upper, pack_r
-from uav_fusion.core.estimators.objects import ObjectTable, RadarObject, ScoreConfig
-from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
 from uav_fusion.core.estimators.steps import nis_gate
+from uav_fusion.core.profiles.model import Profile
+from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import RadarFrame, RadarTrack
 from uav_fusion.core.site import Site
 

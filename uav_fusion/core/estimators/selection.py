@@ -31,7 +31,7 @@ import numpy as np
 
 from uav_fusion.core.data.uav_class import uav_class_tracks
 from uav_fusion.core.estimators.kalman import PackedR
-from uav_fusion.core.estimators.profile import Profile, load_profile
+from uav_fusion.core.profiles.model import Profile, load_profile
 from uav_fusion.core.records import (
     RADAR,
     RF,

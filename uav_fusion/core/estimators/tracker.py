@@ -52,7 +52,6 @@ from uav_fusion.core.estimators.parts import (
     rf_start,
     scale_packed,
 )
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.smoothing import SegmentSmoother
 from uav_fusion.core.estimators.steps import (
@@ -64,6 +63,7 @@ from uav_fusion.core.estimators.steps import (
     UPDATED,
     Step,
 )
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
 

@@ -45,8 +45,8 @@ import numpy.typing as npt
 from scipy.stats import chi2
 
 from uav_fusion.core.estimators.grid import GridEmitter, GridState, Predict, StepGrid
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import Step
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RF, Flight
 from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import Site
