@@ -222,7 +222,7 @@ def test_frame_candidates_with_one_stamp_are_processed_as_one_frame(ctx: Context
 
 
 def test_idle_timer_flushes_the_buffer(ctx: Context) -> None:
-    h = Harness(ctx, idle_flush_s=0.2)
+    h = Harness(ctx, reorder_window_s=2.0, idle_flush_s=0.2)
     m = Measurement(1759866140.0, RADAR, np.array([300.0, 0.0, 50.0]), R=np.eye(3))
     h.pub_radar.publish(cv.radar_measurement_to_msg(m, FRAME))
     h.spin_until(lambda: h.fusion.received[RADAR] == 1)
