@@ -53,6 +53,7 @@ class FlightResult:
     samples: GridSamples
     steps: int
     seconds: float
+    family: str | None = None  # the world family of the flight (None: the twin's own world)
 
 
 def generate_task(task: GenerateTask) -> bool:
@@ -81,4 +82,5 @@ def score_task(task: ScoreTask) -> FlightResult:
         samples=samples,
         steps=len(result.steps),
         seconds=time.perf_counter() - t0,
+        family=cf.flight.family,
     )
