@@ -74,6 +74,7 @@ _NAN_STATE = _pack(*(math.nan,) * 27)
 # a filter's (x, P) lists with their packed bytes, mode probabilities and effective q
 _Packed = tuple[object, object, bytes, tuple[float, ...], tuple[float, float, float]]
 
+
 class TrackerStep(Step):
     """A :class:`Step` with the measurement, its object's UAV score, the robust weight, the
     IMM mode probabilities and the track segment (a new one starts at every track start)."""
@@ -237,12 +238,12 @@ class Tracker:
         return frames_input(flight, self.profile)
 
     def status(self) -> dict[str, object]:
-        """The followed radar object, its UAV score and probability, and the time since the
-        last accepted measurement and the last 3D radar update."""
+        """The followed radar object, its UAV score and probability, the time since the
+        last accepted measurement and the last 3D radar update, and the radar's registration."""
         best = self.best_track()
         if best is None:
-            return {"track": "tentative" if self.active else "none"}
-        out: dict[str, object] = {"track": "confirmed"}
+            return {"track": "tentative" if self.active else "none", **self.front.status()}
+        out: dict[str, object] = {"track": "confirmed", **self.front.status()}
         ref = self.t
         if best.last_update_t is not None and ref is not None:
             out["since_last_accepted_s"] = f"{ref - best.last_update_t:.3f}"
@@ -514,7 +515,11 @@ class Tracker:
         if coarse and not (a.cep is not None and a.cep <= self.cfg.rf_support_max_cep_m):
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         r = self.rf_r.r_for(a.cep, a.valid_sensors)
-        self.objects.rf_fix(t, a.e, a.n, 0.5 * (r[0] + r[2]))
+        var = 0.5 * (r[0] + r[2])
+        self.objects.rf_fix(t, a.e, a.n, var)
+        obj = self.objects.credited
+        if obj is not None and self.confirmed and obj.id == self.followed:
+            self.front.register(t, a.e, a.n, var, obj)
         if coarse:
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         if not self._advance(t):
