@@ -138,7 +138,8 @@ CSV_FIELDS = (
     "observable_epochs", "observable_coverage_pct", "observable_gross_pct",
     "observable_after_start_pct", "anees",
     "nees_in95_pct", "ttf_s", "restarts", "gross_vertical_pct", "gross_age_p50_s",
-    "gross_rf_pct", "longest_gross_s", "steps", "seconds",
+    "gross_rf_pct", "longest_gross_s", "registration_az_deg", "registration_az_sigma_deg",
+    "steps", "seconds",
 )
 
 # the per-flight Markdown table, (GridScore field, header, format): most of the printed
@@ -248,6 +249,9 @@ def write_csv(
                 "family": r.family or "", "split": r.split, "steps": r.steps,
                 "seconds": f"{r.seconds:.3f}",
             }
+            if r.registration is not None:
+                d["registration_az_deg"] = f"{r.registration[0]:.3f}"
+                d["registration_az_sigma_deg"] = f"{r.registration[1]:.3f}"
             for k, v in s.as_dict().items():
                 if k in CSV_FIELDS and k not in d:
                     d[k] = "" if isinstance(v, float) and not math.isfinite(v) else (
