@@ -15,7 +15,7 @@ from uav_fusion.core.estimators.gates import FAR_SIGMAS, PhysicalGates
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
 from uav_fusion.core.profiles.settings import ScoreConfig
-from uav_fusion.core.records import RadarFrame, RfAttempt
+from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 
 GROUND_ID = 500
@@ -235,3 +235,56 @@ def test_a_small_move_needs_no_second_fix() -> None:
     tol = FAR_SIGMAS * math.sqrt(2.0) * sd + 120.0
     assert not gates.rf_move_allowed(5.0, tol + 1.0, 0.0, sd * sd, 500.0)  # held in its place
     assert gates.rf_move_allowed(9.0, tol + 1.0 + tol - 1.0, 0.0, sd * sd, 500.0)
+
+
+def test_agreeing_rf_fixes_outside_the_gate_end_the_track_at_the_third() -> None:
+    gates = PhysicalGates(ScoreConfig(reach_margin_m=200.0), 30.0)
+    gates.confirmed_state(0.0, [0.0, 0.0, 50.0, 0.0, 0.0, 0.0], 4.0)
+    var = 10.0**2
+    # two agreeing fixes 400 m off are not enough; the third ends the track ...
+    assert not gates.rf_outside(4.0, 400.0, 0.0, var, 3)
+    assert not gates.rf_outside(8.0, 410.0, 0.0, var, 3)
+    assert gates.rf_outside(12.0, 420.0, 0.0, var, 3)
+    # ... and the last fix becomes the state the next start must be reachable from
+    assert gates.anchor is not None and (gates.anchor.t, gates.anchor.e) == (12.0, 420.0)
+    assert not gates.reachable(12.0, 0.0, 0.0)
+    # a fix that disagrees with the run starts a new one; a fix inside the gate ends it
+    assert not gates.rf_outside(16.0, 400.0, 0.0, var, 3)
+    assert not gates.rf_outside(20.0, 400.0, 900.0, var, 3)  # 900 m in 4 s: another emitter
+    assert not gates.rf_outside(24.0, 400.0, 910.0, var, 3)
+    gates.rf_inside()
+    assert not gates.rf_outside(28.0, 400.0, 920.0, var, 3)
+    assert not gates.rf_outside(32.0, 400.0, 930.0, var, 3)
+    assert gates.rf_outside(36.0, 400.0, 940.0, var, 3)
+
+
+def test_a_track_on_a_decoy_is_dropped_when_the_rf_fixes_say_the_uav_is_elsewhere(
+    site: Site, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the radar sees only a decoy 300 m from the UAV, classed UAV, moving like one; the RF
+    # fixes (one every 4 s) are on the UAV
+    sc = Loop(site, seed=7)
+
+    def decoy(scene: Scene, t: float, k: int) -> RadarTrack:
+        p = scene.uav(t) + np.array([300.0, 0.0, 0.0])
+        vel = (scene.uav(t + 0.01) - scene.uav(t)) / 0.01
+        return scene.report(t, GROUND_ID, p, 0.9, vel)
+
+    sc.build(60.0, uav_visible=lambda t: False, decoy=decoy)
+    tr = Tracker(load_profile("tracker"), site)
+    steps = run_tracker(tr, sc.stream())
+    start = next(s for s in steps if s.status == "initialised")
+    assert start.track_id == GROUND_ID and start.t == 2.0
+    rf = [s for s in steps if s.source == "rf" and s.t > start.t]
+    # the first two fixes after the start are refused by the gate, the third ends the track
+    # and starts an RF track at the emitter
+    assert [(s.status, s.reason) for s in rf[:3]] == [
+        ("coasted", "nis"), ("coasted", "nis"), ("tentative", "start"),
+    ]  # fmt: skip
+    assert tr.counters["reinit_rf_disagrees"] >= 1 and sc.error(rf[2]) < 30.0
+    # the rule decides: without it the track stays on the decoy, 300 m off, all along
+    monkeypatch.setattr(PhysicalGates, "rf_outside", lambda self, *a: False)
+    tr = Tracker(load_profile("tracker"), site)
+    steps = run_tracker(tr, sc.stream())
+    assert "reinit_rf_disagrees" not in tr.counters
+    assert min(sc.error(s) for s in steps if s.counted and s.t > start.t) > 250.0

@@ -25,6 +25,12 @@ says so:
   what the UAV can fly between them); then the second one is used. A non-line-of-sight fix
   can be consistent and have a small CEP, but two such fixes from different times rarely
   agree; a UAV that really moved is followed one fix later.
+* **RF against the radar.** The UAV carries the emitter. When ``track.confirm_m`` RF fixes
+  in a row fall outside the track's gate while agreeing with each other (each within three
+  sigmas of both plus what the UAV can fly between them), the radar object the track
+  follows is not the UAV: the track is dropped (``rf_disagrees``), the last fix becomes the
+  state the next start must be reachable from, and the fixes may start the next track. Any
+  fix inside the gate ends the run.
 """
 
 from __future__ import annotations
@@ -71,6 +77,7 @@ class PhysicalGates:
         self.anchor: Anchor | None = None
         self.airborne = False
         self.held: HeldFix | None = None
+        self.outside: list[HeldFix] = []  # agreeing fixes outside the gate, in a row
 
     # --- the anchor ---------------------------------------------------------------------
     def confirmed_state(self, t: float, x: list[float], p_uu: float) -> None:
@@ -110,6 +117,32 @@ class PhysicalGates:
         return None
 
     # --- RF-only moves ------------------------------------------------------------------
+    def agrees(self, a: HeldFix, b: HeldFix) -> bool:
+        """Whether fix ``b`` agrees with the earlier fix ``a``: within three sigmas of both
+        plus what the UAV can fly between them."""
+        reach = 0.0 if self.vmax is None else self.vmax * max(0.0, b.t - a.t)
+        tol = FAR_SIGMAS * math.sqrt(a.var + b.var) + reach
+        return (b.e - a.e) ** 2 + (b.n - a.n) ** 2 <= tol * tol
+
+    def rf_inside(self) -> None:
+        """An RF fix inside the track's gate: the run of disagreeing fixes ends."""
+        self.outside.clear()
+
+    def rf_outside(self, t: float, e: float, n: float, var: float, needed: int) -> bool:
+        """An RF fix outside the track's gate; True once ``needed`` such fixes in a row agree
+        with each other (the run then starts again)."""
+        fix = HeldFix(t, e, n, var)
+        run = self.outside
+        if run and not self.agrees(run[-1], fix):
+            run.clear()
+        run.append(fix)
+        if len(run) >= needed:
+            run.clear()
+            # where the UAV is now: the emitter, not the object the track was on
+            self.anchor = Anchor(t, e, n)
+            return True
+        return False
+
     def rf_move_allowed(self, t: float, e: float, n: float, var: float, move_m: float) -> bool:
         """Whether a fix at (``e``, ``n``) (variance ``var`` per axis) may move the track by
         ``move_m``: a small move, or a far one that a held fix corroborates. A far fix that
@@ -118,13 +151,11 @@ class PhysicalGates:
             self.held = None
             return True
         h = self.held
-        if h is not None and t > h.t:
-            reach = 0.0 if self.vmax is None else self.vmax * (t - h.t)
-            tol = FAR_SIGMAS * math.sqrt(var + h.var) + reach
-            if (e - h.e) ** 2 + (n - h.n) ** 2 <= tol * tol:
-                self.held = None
-                return True
-        self.held = HeldFix(t, e, n, var)
+        fix = HeldFix(t, e, n, var)
+        if h is not None and t > h.t and self.agrees(h, fix):
+            self.held = None
+            return True
+        self.held = fix
         return False
 
 

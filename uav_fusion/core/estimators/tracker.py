@@ -512,6 +512,8 @@ class Tracker:
         if obj is not None and self.confirmed and obj.id == self.followed:
             self.front.register(t, a.e, a.n, var, obj)
         if coarse:
+            if self.confirmed and self.t is not None and t >= self.t:
+                self._coarse_check(t, z, r, var)
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         if not self._advance(t):
             return [self._step(t, RF, DISCARDED, "out_of_order", None, z, None)]
@@ -524,15 +526,37 @@ class Tracker:
             return [self._tentative_test(t, z, r)]
         self._hold_vz(t, f)
         nis = f.nis(z, r)
+        gates = self.gates
         if nis <= self._g2:
-            if not self.gates.rf_move_allowed(t, a.e, a.n, var, rf_move(f, z, r)):
+            gates.rf_inside()
+            if not gates.rf_move_allowed(t, a.e, a.n, var, rf_move(f, z, r)):
                 # far from the track: held until a second fix agrees (gates.py)
                 self._count("rf_held")
                 return [self._step(t, RF, DISCARDED, "held", nis, z, None)]
             w = self.robust.weight(nis, 2)
             f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             return [self._used(t, RF, nis, z, None, None, w)]
+        if gates.rf_outside(t, a.e, a.n, var, max(2, self.profile.confirm_m)):
+            # agreeing fixes outside the gate, in a row: the track is not on the UAV
+            self._drop("rf_disagrees")
+            if RF in self.profile.init_sources:
+                return [self._start_rf(t, z, r)]
+            return [self._step(t, RF, DISCARDED, "no_track", None, z, None)]
         return [self._rejected(t, RF, nis, z, None, None)]
+
+    def _coarse_check(self, t: float, z: tuple[float, ...], r: PackedR, var: float) -> None:
+        """A fix too coarse to update the track still says whether the track is near the
+        emitter: it joins the run of agreeing fixes outside the gate (gates.py), and may end
+        the track (it does not start one)."""
+        x, p = self.predict_to(t)
+        ye, yn = z[0] - x[0], z[1] - x[1]
+        a, b, d = p[0, 0] + r[0], p[0, 1] + r[1], p[1, 1] + r[2]
+        det = a * d - b * b
+        nis = (d * ye * ye - 2.0 * b * ye * yn + a * yn * yn) / det if det > 0 else math.inf
+        if nis <= self._g2:
+            self.gates.rf_inside()
+        elif self.gates.rf_outside(t, z[0], z[1], var, max(2, self.profile.confirm_m)):
+            self._drop("rf_disagrees")
 
     def _hold_vz(self, t: float, f: MotionFilter) -> None:
         hold = self.profile.vz_hold_after_s
