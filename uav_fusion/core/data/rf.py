@@ -43,7 +43,8 @@ REQUIRED = ("Meas ID", "Latitude", "Longitude", "Time")
 OPTIONAL = ("CEP", "Total Sensors", "Valid Sensors", "Center Frequency", "RHO")
 
 
-def _key(name: str) -> str:
+def column_key(name: str) -> str:
+    """A header name as matched: spaces collapsed, lower case."""
     return " ".join(name.split()).lower()
 
 
@@ -73,8 +74,8 @@ def header_problem(header: list[str] | None, not_csv: str | None) -> str | None:
     """Why a header row cannot be used (not CSV, a required column missing), or None."""
     if header is None:
         return f"header line is not CSV: {not_csv}"
-    col = {_key(h) for h in header if h.strip()}
-    missing = [c for c in REQUIRED if _key(c) not in col]
+    col = {column_key(h) for h in header if h.strip()}
+    missing = [c for c in REQUIRED if column_key(c) not in col]
     if missing:
         found = ", ".join(repr(h.strip()) for h in header)
         return f"header lacks column(s) {', '.join(repr(m) for m in missing)}; found: {found}"
@@ -99,10 +100,10 @@ class RfLines:
         self.set_header(header)
 
     def set_header(self, header: list[str]) -> None:
-        col = {_key(h): i for i, h in enumerate(header) if h.strip()}
-        self.i_id, self.i_lat, self.i_lon, self.i_time = (col[_key(c)] for c in REQUIRED)
+        col = {column_key(h): i for i, h in enumerate(header) if h.strip()}
+        self.i_id, self.i_lat, self.i_lon, self.i_time = (col[column_key(c)] for c in REQUIRED)
         self.i_cep, self.i_tot, self.i_val, self.i_freq, self.i_rho = (
-            col.get(_key(c)) for c in OPTIONAL
+            col.get(column_key(c)) for c in OPTIONAL
         )
         self.n_cols = len(header)
 
