@@ -64,7 +64,7 @@ def test_tcp_source_drops_and_comes_back(ctx: Context) -> None:
                 h.ex.spin_once(timeout_sec=0.01)
         for ln in lines[5:]:
             srv.send(ln)
-        h.spin_until(lambda: len(h.got["radar/tracks"]) == 10)
+        h.spin_until(lambda: len(h.got["radar/tracks"]) == len(h.got["radar/pose"]) == 10)
         v = h.settled(lines=10)
         assert _stamps(h) == times
         assert len(h.got["radar/pose"]) == 10
@@ -176,7 +176,7 @@ def test_ten_malformed_lines_in_a_row(ctx: Context) -> None:
         # 14 datagrams, 13 lines (the long one is never a line); the NaN frame is kept empty
         v = h.settled(lines=13)
         clouds = h.got["radar/tracks"]
-        h.spin_until(lambda: len(clouds) == 5)
+        h.spin_until(lambda: len(clouds) == 5 and len(h.got["radar/pose"]) == 4)
         assert _stamps(h) == [T0, T0 + 1, T0 + 2, T0 + 10, T0 + 11]
         assert clouds[2].width == 0 and len(h.got["radar/pose"]) == 4
         assert _counts(v) == {
