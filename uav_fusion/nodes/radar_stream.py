@@ -91,15 +91,12 @@ class RadarStream(StreamNode):
         for frame in records:
             assert isinstance(frame, RadarFrame)
             if self.pub_tracks is not None:
-                self.pub_tracks.publish(cv.radar_frame_to_cloud_msg(frame, fid, self.cov))
-                n += 1
+                n += self.send(self.pub_tracks, cv.radar_frame_to_cloud_msg(frame, fid, self.cov))
             for trk in frame.tracks:
                 if self.pub_pose is not None:
-                    self.pub_pose.publish(cv.radar_track_to_msg(trk, self.R, fid))
-                    n += 1
+                    n += self.send(self.pub_pose, cv.radar_track_to_msg(trk, self.R, fid))
                 if self.uav_class.is_uav(trk) and self.pub_raw is not None:
-                    self.pub_raw.publish(cv.radar_track_to_msg(trk, self.R, fid))
-                    n += 1
+                    n += self.send(self.pub_raw, cv.radar_track_to_msg(trk, self.R, fid))
         return n
 
 

@@ -61,10 +61,8 @@ class RfStream(StreamNode):
         for a in records:
             assert isinstance(a, RfAttempt)
             if self.pub_fixes is not None:
-                self.pub_fixes.publish(rf_attempts_to_cloud_msg([a], self.frame_id))
-                n += 1
-            self.pub.publish(rf_attempt_to_msg(a, self.frame_id))
-            n += 1
+                n += self.send(self.pub_fixes, rf_attempts_to_cloud_msg([a], self.frame_id))
+            n += self.send(self.pub, rf_attempt_to_msg(a, self.frame_id))
         return n
 
 

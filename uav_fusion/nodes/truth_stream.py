@@ -48,10 +48,11 @@ class TruthStream(StreamNode):
 
     def publish_records(self, records: Sequence[Record]) -> int:
         frame = str(self.p["truth_frame"])
+        n = 0
         for fix in records:
             assert isinstance(fix, TruthFix)
-            self.pub.publish(truth_to_navsatfix(fix, frame))
-        return len(records)
+            n += self.send(self.pub, truth_to_navsatfix(fix, frame))
+        return n
 
 
 def main(args: Sequence[str] | None = None) -> int:

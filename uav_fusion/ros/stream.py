@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections import Counter
 from collections.abc import Sequence
 from typing import Any
 
@@ -152,6 +153,8 @@ class StreamNode(Node):
         except ConfigError as exc:
             raise ParamError(f"{name}: parameter 'url' = {url!r}: {exc}") from None
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS)
+        #: messages published per topic (resolved name)
+        self.sent: Counter[str] = Counter()
         self.started = False
         self._created = time.monotonic()
         self._poll = self.create_timer(0.1, self._on_poll)
@@ -166,6 +169,12 @@ class StreamNode(Node):
     def publish_records(self, records: Sequence[Record]) -> int:
         """Publish the records of one line; the number of messages sent."""
         raise NotImplementedError
+
+    def send(self, pub: Publisher, msg: Any) -> int:
+        """Publish ``msg`` on ``pub`` and count it; 1."""
+        pub.publish(msg)
+        self.sent[pub.topic_name] += 1
+        return 1
 
     def stream_groups(self) -> list[tuple[Publisher, ...]]:
         """Groups of publishers of which one needs a subscriber before reading starts (one
