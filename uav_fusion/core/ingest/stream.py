@@ -76,6 +76,7 @@ class Ingest:
         self._notify = notify
         self._cut_seen = 0
         self._too_long_seen = 0
+        self.started = False
         self.transport: Transport = open_transport(
             endpoint,
             self._on_lines,
@@ -95,6 +96,7 @@ class Ingest:
 
     # --- node thread ---------------------------------------------------------------------
     def start(self) -> None:
+        self.started = True
         self.transport.start()
 
     def close(self) -> None:
@@ -150,7 +152,12 @@ class Ingest:
         self._sync_transport()
         st = self.transport.stats
         pol = self.decoder.policy
-        values: list[tuple[str, str]] = [("source", str(self.endpoint)), ("state", st.state)]
+        state = st.state if self.started else "not reading yet (waiting for subscribers)"
+        values: list[tuple[str, str]] = [
+            ("source", str(self.endpoint)),
+            ("reading", "true" if self.started and self.transport.is_alive() else "false"),
+            ("state", state),
+        ]
         values += self.monitor.values(now)
         values += [
             ("connects", str(st.connects)),
@@ -171,10 +178,10 @@ class Ingest:
             ("last_error", st.last_error or "-"),
         ]
         problems = self.monitor.warnings(now)
-        if not st.state.startswith(_WORKING):
-            problems.insert(0, st.state)
+        if not state.startswith(_WORKING):
+            problems.insert(0, state)
         if pol.dropped:
             problems.append(f"{sum(pol.dropped.values())} line(s) dropped")
         if problems:
             return True, "; ".join(problems), values
-        return False, f"{st.state}; {self.monitor.lines} lines", values
+        return False, f"{state}; {self.monitor.lines} lines", values
