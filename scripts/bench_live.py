@@ -15,7 +15,10 @@ times come from its arrival schedule, ``--schedule``). Two figures per run:
 - **step**: the message on ``fusion/odom/updated`` or ``fusion/odom/coasted`` stamped with the
   line's frame time (every filter step is on one of them);
 - **odom**: the first message on ``fusion/odom`` stamped at or after the frame time (the paper
-  profile: the step itself; tracker profiles: the fixed-rate output passing the frame).
+  profile: the step itself; tracker profiles: the fixed-rate output passing the frame; while
+  the tracker has no confirmed track it publishes no epoch, and a frame of such a stretch
+  counts until the first epoch after it, which makes this figure's tail long);
+- **stream**: ``radar_stream``'s own line-to-publish latency from its ``/diagnostics``.
 
 Each run takes ``--wall-s`` wall seconds of flight (``rate`` x that many sensor seconds from
 ``--start-s`` into the flight; the whole flight at most), at each ``--rates`` over each
@@ -76,7 +79,10 @@ class RunResult:
     odom_matched: int
     odom_p50_ms: float
     odom_p99_ms: float
-    emulator_late_p99_ms: float
+    #: radar_stream's own line-to-publish latency (its /diagnostics at the end of the run)
+    stream_p50_ms: float
+    stream_p99_ms: float
+    emulator_late_max_ms: float
 
 
 def quantile(xs: list[float], q: float) -> float:
@@ -235,6 +241,7 @@ def one_run(listener: Listener, args: argparse.Namespace, via: str, rate: float,
             if n != last[0]:
                 last = (n, time.monotonic())
             time.sleep(0.05)
+        radar_status = dict(listener.status.get("radar_stream: radar input", {}))
     finally:
         stop(procs)
     rows = read_schedule(sched)
@@ -271,8 +278,17 @@ def one_run(listener: Listener, args: argparse.Namespace, via: str, rate: float,
         step_p99_ms=quantile(step_lat, 0.99), step_max_ms=max(step_lat, default=float("nan")),
         odom_matched=len(odom_lat), odom_p50_ms=quantile(odom_lat, 0.5),
         odom_p99_ms=quantile(odom_lat, 0.99),
-        emulator_late_p99_ms=late[0] if late else float("nan"),
+        stream_p50_ms=_num(radar_status.get("latency_p50_ms")),
+        stream_p99_ms=_num(radar_status.get("latency_p99_ms")),
+        emulator_late_max_ms=late[0] if late else float("nan"),
     )
+
+
+def _num(text: str | None) -> float:
+    try:
+        return float(text) if text is not None else float("nan")
+    except ValueError:
+        return float("nan")
 
 
 def parse_variant(text: str) -> tuple[str, dict[str, str]]:
@@ -288,12 +304,14 @@ def parse_variant(text: str) -> tuple[str, dict[str, str]]:
 
 def table(results: list[RunResult]) -> str:
     head = (f"{'via':<5} {'rate':>5} {'variant':<12} {'lines':>6} {'steps':>6} "
-            f"{'step p50 ms':>11} {'step p99 ms':>11} {'odom p50 ms':>11} {'odom p99 ms':>11}")
+            f"{'step p50 ms':>11} {'step p99 ms':>11} {'odom p50 ms':>11} {'odom p99 ms':>11} "
+            f"{'stream p50/p99 ms':>17}")
     lines = [head, "-" * len(head)]
     for r in results:
         lines.append(f"{r.via:<5} {r.rate:>4g}x {r.variant:<12} {r.radar_lines:>6} "
                      f"{r.steps_matched:>6} {r.step_p50_ms:>11.1f} {r.step_p99_ms:>11.1f} "
-                     f"{r.odom_p50_ms:>11.1f} {r.odom_p99_ms:>11.1f}")
+                     f"{r.odom_p50_ms:>11.1f} {r.odom_p99_ms:>11.1f} "
+                     f"{r.stream_p50_ms:>8.2f}/{r.stream_p99_ms:<8.2f}")
     return "\n".join(lines)
 
 

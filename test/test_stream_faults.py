@@ -8,6 +8,8 @@ connection accepted, a message received, a counter reached), never fixed sleeps.
 from __future__ import annotations
 
 import socket
+import subprocess
+import sys
 import time
 from datetime import UTC, datetime
 from pathlib import Path
@@ -258,3 +260,16 @@ def test_udp_port_taken_is_a_bad_url(ctx: Context) -> None:
                 Parameter("url", value=f"udp://127.0.0.1:{port}")])
     finally:
         taken.close()
+
+
+@pytest.mark.processes
+def test_bad_url_console_script_exits_2_naming_the_parameter(tmp_path: Path) -> None:
+    exe = Path(sys.executable).parent / "rf_stream"
+    if not exe.exists():
+        pytest.skip("rf_stream is not installed (pip install -e .)")
+    bad = str(tmp_path / "missing" / "AADM.csv")
+    done = subprocess.run([str(exe), "--ros-args", "-p", f"url:={bad}"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2
+    assert f"parameter 'url' = '{bad}'" in done.stderr + done.stdout
+    assert "does not exist" in done.stderr + done.stdout
