@@ -238,3 +238,9 @@ def test_reindex_refuses_what_is_not_a_bag(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     with pytest.raises(DataError, match=r"no \.mcap file"):
         reindex(tmp_path / "empty")
+    # killed before its first flush: not one whole record; the file is kept, set aside
+    (tmp_path / "early" / "early_0").mkdir(parents=True)
+    (tmp_path / "early" / "early_0" / "early_0.mcap").write_bytes(b"\x89MCAP0\r\n\x01\x10")
+    with pytest.raises(DataError, match="no file holds a whole record"):
+        reindex(tmp_path / "early")
+    assert [p.name for p in (tmp_path / "early").iterdir()] == ["early_0.mcap.unreadable"]

@@ -49,7 +49,7 @@ class FileReport:
     """What happened to one storage file."""
 
     path: Path  # where it is now
-    status: str  # "complete" | "recovered" | "empty"
+    status: str  # "complete" | "recovered" | "recovered (no message)" | "unreadable"
     messages: int
     lost_bytes: int = 0  # bytes after the last whole record (recovered files)
     note: str = ""
@@ -234,6 +234,10 @@ def _recover(path: Path, dest: Path) -> tuple[_FileInfo, int]:
                     good_end = f.tell()
             except Exception:  # the first record that is not whole ends the readable part
                 pass
+        if not info.topics:  # not one whole record: leave the file as it is
+            out.close()
+            tmp.unlink(missing_ok=True)
+            return info, size
         w = ensure_writer()
         for m in metadata:
             w.add_metadata(m.name, dict(m.metadata))
@@ -385,16 +389,25 @@ def reindex(
             reports.append(FileReport(path, "needs recovery", 0))
             continue
         info, lost = _recover(path, dest)
-        status = "recovered" if info.count else "empty"
-        note = "" if info.count else "no whole chunk: nothing was flushed"
-        reports.append(FileReport(dest, status, info.count, lost, note))
-        say(f"{path.name}: {status}, {info.count} messages, {lost} bytes dropped")
-        if info.count or info.topics:
+        if info.topics:
+            status = "recovered" if info.count else "recovered (no message)"
+            reports.append(FileReport(dest, status, info.count, lost))
             infos.append(info)
+            if path.parent != bag:
+                _remove_part_dir(path.parent)
         else:
-            dest.unlink(missing_ok=True)
-        if path.parent != bag:
-            _remove_part_dir(path.parent)
+            # not one whole record (killed before its first flush, or not an MCAP): kept
+            # aside under another name, out of the bag's files
+            aside = bag / (path.name + ".unreadable")
+            path.replace(aside)
+            reports.append(FileReport(aside, "unreadable", 0, lost,
+                                      "no whole record: nothing of it was flushed; set aside"))
+            if path.parent != bag:
+                _remove_part_dir(path.parent)
+        say(f"{path.name}: {reports[-1].status}, {info.count} messages, {lost} bytes dropped")
+    if not infos and not dry_run:
+        raise DataError(bag, None, "no file holds a whole record (nothing was flushed before "
+                        "the recorder stopped); the files were set aside as *.unreadable")
     counts: Counter[str] = Counter()
     for fi in infos:
         for name, t in fi.topics.items():
