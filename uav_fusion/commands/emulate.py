@@ -16,8 +16,12 @@ import signal
 import threading
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from uav_fusion.core.errors import ConfigError
+
+if TYPE_CHECKING:
+    from uav_fusion.core.ingest.emulator import Emulator
 
 HELP = "write a flight folder out as the sensors would (files, TCP or UDP), in real time"
 
@@ -76,7 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--site", type=Path, default=None, help="site YAML (default: bundled)")
 
 
-def build(args: argparse.Namespace) -> tuple[object, dict[str, int]]:
+def build(args: argparse.Namespace) -> tuple[Emulator, dict[str, int]]:
     """The emulator of ``args`` (sinks open) and the planned line count per source."""
     from uav_fusion.core.data.flight import flight_files
     from uav_fusion.core.ingest.emulator import Emulator, open_sink, plan, read_sensor_lines
@@ -113,10 +117,9 @@ def build(args: argparse.Namespace) -> tuple[object, dict[str, int]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from uav_fusion.core.ingest.emulator import Emulator, write_schedule
+    from uav_fusion.core.ingest.emulator import write_schedule
 
     emu, counts = build(args)
-    assert isinstance(emu, Emulator)
     stop = threading.Event()
 
     def on_signal(_sig: int, _frame: FrameType | None) -> None:

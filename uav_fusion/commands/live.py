@@ -100,7 +100,7 @@ class _LiveGraph:
         jitter = per_source(args.jitter, "jitter")
         self.sends = plan(lines, delay_s=delay, jitter_s=jitter, seed=args.seed)
         #: records each stream node must publish (lines with a sensor time)
-        self.expected = {s: sum(1 for x in self.sends if x.source == s and x.sensor_t)
+        self.expected = {s: sum(1 for x in self.sends if x.source == s and x.sensor_t is not None)
                          for s in lines}
         lag = max((delay.get(s, 0.0) + jitter.get(s, 0.0) for s in lines), default=0.0)
         self.window = float(args.window) + lag
