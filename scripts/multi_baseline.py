@@ -112,15 +112,15 @@ from stonesoup.updater.kalman import KalmanUpdater
 
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import Profile, load_profile
-from uav_fusion.core.estimators.components import packed_to_array
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-from uav_fusion.core.estimators.selection import frames_input
-from uav_fusion.core.estimators.tracker import (
+from uav_fusion.core.estimators.parts import (
     alignment_from_profile,
+    packed_to_array,
     radar_model_from_profile,
     rf_model_from_profile,
 )
+from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.scoring.gospa import MultiScoreSettings, UavTruth, pool, score_flight
 from uav_fusion.core.scoring.metrics import interpolate_truth

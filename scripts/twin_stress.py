@@ -18,7 +18,7 @@ import numpy as np
 
 from uav_fusion.core.data import uav_class
 from uav_fusion.core.estimators.offline import run_flight
-from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.profiles.model import load_profile
 from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin import generate_twin, load_flight_plan, load_twin_config, twin_to_flight

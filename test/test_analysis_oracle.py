@@ -20,7 +20,8 @@ from uav_fusion.core.analysis.oracle import (
 )
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators import load_profile
-from uav_fusion.core.estimators.multi import emitter_key, run_multi
+from uav_fusion.core.estimators.emitters import emitter_key
+from uav_fusion.core.estimators.multi import run_multi
 from uav_fusion.core.records import RadarFrame, RadarTrack
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin import radar_model

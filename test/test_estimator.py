@@ -119,29 +119,6 @@ def test_kernel_gate_leaves_state_untouched() -> None:
     assert math.isnan(k.update2(math.nan, 0.0, pack_r(R2), 5.99)) and k.x == x0
 
 
-def test_fused_predict_update3_is_bit_identical_to_predict_then_update3() -> None:
-    rng = np.random.default_rng(3)
-    q = (0.5, 1.0, 2.0)
-    a, b = CvKalman(q), CvKalman(q)
-    A = rng.normal(size=(6, 6))
-    a.set_state(rng.normal(size=6) * 100, A @ A.T + np.eye(6))
-    b.x, b.P = list(a.x), list(a.P)
-    for i in range(200):
-        T = 0.0 if i % 7 == 0 else float(rng.uniform(0, 3))
-        z = [float(v) for v in np.array(a.x[:3]) + rng.normal(size=3) * 5]
-        B = rng.normal(size=(3, 3)) * 4
-        r = pack_r(B @ B.T + np.eye(3) * 10)
-        a.predict(T)
-        nis_a = a.update3(z[0], z[1], z[2], r)
-        nis_b = b.predict_update3(T, z[0], z[1], z[2], r)
-        assert nis_a == nis_b and a.x == b.x and a.P == b.P
-    # a NaN measurement: both keep the predicted state
-    a.predict(0.5)
-    nis_a = a.update3(math.nan, 0.0, 0.0, r)
-    nis_b = b.predict_update3(0.5, math.nan, 0.0, 0.0, r)
-    assert math.isnan(nis_a) and math.isnan(nis_b) and a.x == b.x and a.P == b.P
-
-
 # --- gates and steps -------------------------------------------------------------------------
 def test_first_radar_initialises_then_updates(site: Site) -> None:
     est = FusionEstimator(_profile(), site)

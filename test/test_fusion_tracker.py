@@ -21,11 +21,12 @@ from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile
-from uav_fusion.core.estimators.grid import StepGrid
-from uav_fusion.core.estimators.multi import MultiGrid, MultiTracker
+from uav_fusion.core.estimators.base import feed, make_estimator
+from uav_fusion.core.estimators.grid import Outputs, StepGrid
 from uav_fusion.core.estimators.offline import run_tracker, smooth_steps
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import Tracker
+from uav_fusion.core.live.rewind import simulate
 from uav_fusion.core.records import RadarFrame, RadarTrack
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode
@@ -98,14 +99,17 @@ def flight_data() -> tuple[list[Any], list[Any], list[Any]]:
     return frames, attempts, stream
 
 
-def _order(frames: list[Any], attempts: list[Any], delay_s: float, seed: int) -> list[Any]:
-    """Both streams as messages, interleaved; RF up to ``delay_s`` late (its own order kept)."""
+def _order(
+    frames: list[Any], attempts: list[Any], delay_s: float, seed: int, min_delay_s: float = 0.0
+) -> list[Any]:
+    """Both streams as messages, interleaved; RF ``min_delay_s`` to ``delay_s`` late (its own
+    order kept)."""
     rng = random.Random(seed)
     keyed = [(fr.t, 0, k, "radar", cv.radar_frame_to_cloud_msg(fr, FRAME))
              for k, fr in enumerate(frames)]  # fmt: skip
     last = -1.0
     for k, a in enumerate(attempts):
-        last = max(last, a.t + rng.uniform(0.0, delay_s))
+        last = max(last, a.t + rng.uniform(min_delay_s, delay_s))
         keyed.append((last, 1, k, "rf", cv.rf_attempts_to_cloud_msg([a], FRAME)))
     keyed.sort(key=lambda e: (e[0], e[1], e[2]))
     return [(kind, msg) for _, _, _, kind, msg in keyed]
@@ -149,6 +153,57 @@ def test_live_tracker_equals_the_offline_run_and_its_grid(
     diag = h.fusion.diagnostics()
     assert n_flat > 100 and int(diag["estimator_updated_radar_horizontal"]) == n_flat
     assert float(diag["since_last_3d_radar_s"]) >= 0.0
+    h.destroy()
+
+
+def _key(s: Any) -> tuple[Any, ...]:
+    return (s.t, s.source, s.status, s.reason, repr(s.values))  # repr: NaN equals NaN
+
+
+def test_zero_wait_rf_seconds_late_final_track_equals_in_order_and_live_equals_offline(
+    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+) -> None:
+    """RF 3 s +- 1 s late, zero wait: every input is fused on arrival; after the last one
+    the re-filtered track is the in-order run's, and what the node published equals the
+    offline run of the same arrival order."""
+    frames, attempts, stream = flight_data
+    site = load_site()
+    profile = load_profile("tracker")
+    in_order = run_tracker(Tracker(profile, site), stream)
+    h = Harness(ctx, idle_flush_s=0.0, stall_timeout_s=0.0)
+    pipe = h.fusion.pipeline
+    assert pipe.rewinder is not None  # zero wait is the default
+    arrivals: list[tuple[str, Any]] = []
+    radar_in, rf_in, publish = pipe.radar, pipe.rf, h.fusion.output.publish
+    published: list[Outputs] = []
+
+    def radar(frame: Any, clock: float | None = None) -> Outputs:
+        if frame.tracks:
+            arrivals.append(("radar", frame))
+        return radar_in(frame, clock)
+
+    def rf(atts: Any, clock: float | None = None) -> Outputs:
+        arrivals.extend(("rf", a) for a in atts if a.ok)
+        return rf_in(atts, clock)
+
+    def record(out: Outputs) -> None:
+        published.append(out)
+        publish(out)
+
+    pipe.radar, pipe.rf, h.fusion.output.publish = radar, rf, record  # type: ignore[method-assign]
+    h.feed(_order(frames, attempts, 4.0, 5, min_delay_s=2.0))
+    h.spin_until(lambda: h.got() == len(frames) + len(attempts))
+    h.fusion.flush()
+    assert [_key(s) for s in pipe.rewinder.steps] == [_key(s) for s in in_order]
+    assert pipe.rewinder.rewinds > 10 and not h.fusion.dropped
+    outs, rw, _ = simulate(lambda: make_estimator(profile, site, 10.0, live=True), arrivals)
+    final = rw.steps
+    assert [_key(s) for s in final] == [_key(s) for s in in_order]
+    live_steps = [_key(s) for o in published for s in o.steps]
+    assert live_steps == [_key(s) for o in outs for s in o.steps]
+    live_grid = [(g.k, repr(g.x.tolist())) for o in published for g in o.grid]
+    assert live_grid == [(g.k, repr(g.x.tolist())) for o in outs for g in o.grid]
+    assert len(live_steps) == len(in_order) and len(live_grid) > 1000
     h.destroy()
 
 
@@ -217,7 +272,11 @@ def test_live_fixed_lag_smoothing_equals_the_offline_one(
     steps = run_tracker(Tracker(profile, site), stream)
     smoothed = [s for s in smooth_steps(steps, 3.0) if s.counted]
     assert len(smoothed) > 300
-    h = Harness(ctx, profile="tracker_smoothed", idle_flush_s=0.0, stall_timeout_s=0.0)
+    # a reorder window: late RF is waited for, so the smoothing windows never see a rewind
+    h = Harness(
+        ctx, profile="tracker_smoothed", reorder_window_s=2.0, idle_flush_s=0.0,
+        stall_timeout_s=0.0,
+    )
     got: list[Odometry] = []
     h.io.create_subscription(Odometry, "fusion/odom/smoothed", got.append, stream_qos(10000))
     h.spin_until(lambda: h.fusion.output.pub_smoothed.get_subscription_count() > 0)
@@ -241,15 +300,10 @@ def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
     frames, attempts, stream = flight_data
     site = load_site()
     profile = load_profile("tracker")
-    mt = MultiTracker(profile, site)
-    grid = MultiGrid(mt, 10.0)
+    est = make_estimator(profile, site, 10.0, kind="multi")
     expected = []
     for item in stream:
-        expected.extend(grid.before(item.t))
-        if isinstance(item, RadarFrame):
-            mt.process_radar_frame(item)
-        else:
-            mt.process_rf(item)
+        expected.extend(feed(est, item).tracks)
     rows = [(ep.t, f"track_{o.track_id}", o.x) for ep in expected for o in ep.tracks]
     assert len(rows) > 1000
     h = Harness(ctx, estimator="multi", idle_flush_s=0.0, stall_timeout_s=0.0)

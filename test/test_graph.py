@@ -12,7 +12,9 @@ from rclpy.context import Context
 from test_graph_flight import write_flight
 
 from uav_fusion.core.data import load_flight
-from uav_fusion.core.estimators import load_profile, run_flight
+from uav_fusion.core.estimators import load_profile, make_estimator, run_flight
+from uav_fusion.core.live.rewind import simulate
+from uav_fusion.core.live.schedule import read_schedule
 from uav_fusion.core.scoring.evaluation import Evaluator, feed_flight, feed_steps
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.graph import Graph
@@ -54,50 +56,92 @@ def _run_graph(ctx: Context, ov: dict[str, Any]) -> tuple[Graph, list[cv.OdomSta
     return graph, got
 
 
+def _table_equal(live: Any, ref: Any) -> None:
+    for a, b in zip(live.rows, ref.rows, strict=True):
+        assert a.key == b.key
+        assert a.stats.count == b.stats.count, a.key
+        assert a.denominator == b.denominator, a.key
+        if a.stats.count:
+            assert a.stats.mean == pytest.approx(b.stats.mean, abs=1e-9), a.key
+            assert a.stats.max == pytest.approx(b.stats.max, abs=1e-9), a.key
+
+
+def _same_track(got: list[cv.OdomState], steps: list[Any]) -> None:
+    assert [g.t for g in got] == [s.t for s in steps]
+    err = np.abs(np.array([g.x for g in got]) - np.array([s.x for s in steps]))
+    assert float(err.max()) < 1e-9
+    for g, s in zip(got, steps, strict=True):
+        assert np.allclose(g.P[:3, :3], s.P[:3, :3], rtol=0, atol=1e-9)
+
+
 @pytest.mark.parametrize(
-    ("rate", "rf_delay"),
-    [(0.0, 0.0), (25.0, 0.0), (0.0, 1.5), (25.0, 1.5)],
+    ("rate", "rf_delay", "window"),
+    [(0.0, 0.0, 2.0), (25.0, 0.0, 2.0), (0.0, 1.5, 2.0), (25.0, 1.5, 2.0)],
     ids=["rate0", "rate25", "rate0-rf-late", "rate25-rf-late"],
 )
-def test_graph_track_and_table_equal_the_offline_run(
-    ctx: Context, flight_dir: Path, tmp_path: Path, rate: float, rf_delay: float
+def test_graph_with_a_reorder_window_equals_the_offline_run(
+    ctx: Context, flight_dir: Path, tmp_path: Path, rate: float, rf_delay: float, window: float
 ) -> None:
+    """With a reorder window nothing is fused out of order: the published track and the
+    evaluator's table equal the offline in-order run."""
     site = load_site()
     flight = load_flight(flight_dir, site)
     offline = run_flight(flight, load_profile("paper"), site)
     steps = [s for s in offline.steps if s.updated or s.coasted]
-
-    graph, got = _run_graph(ctx, _overrides(flight_dir, tmp_path, rate, rf_delay))
+    ov = _overrides(flight_dir, tmp_path, rate, rf_delay)
+    ov["fusion_node"]["reorder_window_s"] = window
+    graph, got = _run_graph(ctx, ov)
     try:
-        # the fused track: same steps, same times, states equal to 1e-9
         assert len(got) == len(steps), str(graph.fusion.diagnostics())
-        assert [g.t for g in got] == [s.t for s in steps]
-        err = np.abs(np.array([g.x for g in got]) - np.array([s.x for s in steps]))
-        assert float(err.max()) < 1e-9
-        for g, s in zip(got, steps, strict=True):
-            assert np.allclose(g.P[:3, :3], s.P[:3, :3], rtol=0, atol=1e-9)
+        _same_track(got, steps)
         assert not graph.fusion.dropped
         assert graph.fusion.pipeline.empty["rf_failed_attempt"] == sum(not a.ok for a in flight.rf)
         # RF really arrived late in sensor time, and was reordered
         if rf_delay:
             assert graph.fusion.pipeline.buffer.max_depth > 1
-
         # the evaluator's table equals the offline evaluation of the same data
-        live = graph.evaluator.evaluate()
         ev = Evaluator(radar_enu=site.radar.enu)
         feed_flight(ev, flight)
-        ms = [m for it in _stream(flight) for m in it]
-        feed_steps(ev, offline.steps, ms)
-        ref = ev.evaluate()
-        for a, b in zip(live.rows, ref.rows, strict=True):
-            assert a.key == b.key
-            assert a.stats.count == b.stats.count, a.key
-            assert a.denominator == b.denominator, a.key
-            if a.stats.count:
-                assert a.stats.mean == pytest.approx(b.stats.mean, abs=1e-9), a.key
-                assert a.stats.max == pytest.approx(b.stats.max, abs=1e-9), a.key
+        feed_steps(ev, offline.steps, [m for it in _stream(flight) for m in it])
+        _table_equal(graph.evaluator.evaluate(), ev.evaluate())
         report = graph.evaluator.write_report()
         assert Path(report.markdown).is_file()
+    finally:
+        graph.destroy()
+
+
+@pytest.mark.parametrize("rate", [0.0, 25.0], ids=["rate0", "rate25"])
+def test_graph_zero_wait_with_late_rf_reproduces_offline_from_its_arrivals(
+    ctx: Context, flight_dir: Path, tmp_path: Path, rate: float
+) -> None:
+    """Zero wait (the default), RF 1.5 s late: every input is fused on arrival; the final,
+    re-filtered track equals the in-order run, and what the graph published (the track and
+    the evaluator's table) equals the offline run of the arrival schedule the node wrote."""
+    site = load_site()
+    flight = load_flight(flight_dir, site)
+    profile = load_profile("paper")
+    offline = run_flight(flight, profile, site)
+    ov = _overrides(flight_dir, tmp_path, rate, 1.5)
+    arrivals_file = tmp_path / "arrivals.csv"
+    ov["fusion_node"]["arrivals_file"] = str(arrivals_file)
+    graph, got = _run_graph(ctx, ov)
+    try:
+        rw = graph.fusion.pipeline.rewinder
+        assert rw is not None and rw.rewinds > 0 and not graph.fusion.dropped
+        final = [(s.t, s.status, repr(s.values)) for s in rw.steps]
+        assert final == [(s.t, s.status, repr(s.values)) for s in offline.steps]
+        graph.fusion.flush()
+        graph.fusion.input.arrivals.close()  # type: ignore[union-attr]
+        est = make_estimator(profile, site, live=True)
+        arrivals = read_schedule(arrivals_file, est.flight_input(flight))
+        _outs, _, published = simulate(lambda: make_estimator(profile, site, live=True), arrivals)
+        shown = [p for p in published if p.updated or p.coasted]
+        assert len(got) == len(shown)
+        _same_track(got, [p.step for p in shown])
+        ev = Evaluator(radar_enu=site.radar.enu)
+        feed_flight(ev, flight)
+        feed_steps(ev, published)
+        _table_equal(graph.evaluator.evaluate(), ev.evaluate())
     finally:
         graph.destroy()
 

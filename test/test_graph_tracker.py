@@ -10,8 +10,7 @@ from rclpy.context import Context
 
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile, run_flight
-from uav_fusion.core.estimators.grid import grid_from_steps
-from uav_fusion.core.scoring.fixed_rate import FlightTruth, pool, score_grid
+from uav_fusion.core.scoring.fixed_rate import FlightTruth, grid_from_steps, pool, score_grid
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.graph import Graph
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path

@@ -13,23 +13,18 @@ import pytest
 from scipy.stats import chi2
 
 from uav_fusion.core.estimators import load_profile
-from uav_fusion.core.estimators.grid import (
-    GridEmitter,
-    StepGrid,
-    TrackSnapshot,
-    cv_predictor,
-    grid_from_steps,
-)
+from uav_fusion.core.estimators.grid import GridEmitter, StepGrid, TrackSnapshot, cv_predictor
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import kf_predict
 from uav_fusion.core.estimators.paper import FusionEstimator
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.estimators.synthetic import simulate_stream
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
     ScoreSettings,
     epoch_errors,
+    grid_from_steps,
     nees,
     pool,
     score_grid,

@@ -12,15 +12,15 @@ from script_util import load_script
 from test_multi_tracker import Crossing
 
 from uav_fusion.core.estimators import load_profile
-from uav_fusion.core.estimators.components import packed_to_array
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import cv_process_noise
-from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.estimators.tracker import (
+from uav_fusion.core.estimators.parts import (
     alignment_from_profile,
+    packed_to_array,
     radar_model_from_profile,
     rf_model_from_profile,
 )
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 
@@ -159,7 +159,7 @@ def test_holding_deleter_is_our_m_of_n(mb: ModuleType) -> None:
     from stonesoup.types.track import Track
     from stonesoup.types.update import GaussianStateUpdate
 
-    from uav_fusion.core.estimators.components import MofN
+    from uav_fusion.core.estimators.parts import MofN
 
     t0 = datetime(2026, 1, 1)
     x, P = np.zeros((6, 1)), np.eye(6)

@@ -17,17 +17,10 @@ import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import load_profile, profile_from_dict
-from uav_fusion.core.estimators.multi import (
-    UNKNOWN_EMITTER,
-    GridEpoch,
-    MultiSettings,
-    MultiTracker,
-    TrackOutput,
-    _merge_nis,
-    emitter_key,
-    run_multi,
-    velocity_nis,
-)
+from uav_fusion.core.estimators.emitters import UNKNOWN_EMITTER, emitter_key
+from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
+from uav_fusion.core.estimators.kalman import merge_nis, velocity_nis
+from uav_fusion.core.estimators.multi import MultiSettings, MultiTracker, run_multi
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 
@@ -121,7 +114,7 @@ def test_two_uavs_crossing_keep_their_ids_and_no_clutter_track(site: Site) -> No
 
 
 def test_the_radar_misalignment_is_corrected_before_any_report_is_used(site: Site) -> None:
-    from uav_fusion.core.estimators.components import RadarAlignment
+    from uav_fusion.core.estimators.parts import RadarAlignment
 
     r0 = tuple(float(v) for v in site.radar.enu)
     skew = RadarAlignment(r0, -1.5, -0.5)  # type: ignore[arg-type]
@@ -189,13 +182,13 @@ def test_velocity_and_merge_distances_match_a_linear_solve() -> None:
         for k in (2, 3):
             dp = np.array(xa[:k]) - np.array(xb[:k])
             want = float(dp @ np.linalg.solve(Pa[:k, :k] + Pb[:k, :k], dp))
-            assert _merge_nis(xa, pa, xb, pb, k) == pytest.approx(want, rel=1e-9)
+            assert merge_nis(xa, pa, xb, pb, k) == pytest.approx(want, rel=1e-9)
     x, p, _ = _random_state(rng)
     assert velocity_nis(x, p, None, 1.0) == 0.0
     zero = [0.0] * 21
     assert velocity_nis(x, zero, (1.0, 2.0, 3.0), 0.0) == 0.0  # singular: no velocity cue
-    assert _merge_nis(x, zero, x, zero, 3) is None
-    assert _merge_nis(x, zero, x, zero, 2) is None
+    assert merge_nis(x, zero, x, zero, 3) is None
+    assert merge_nis(x, zero, x, zero, 2) is None
 
 
 def test_emitter_keys() -> None:

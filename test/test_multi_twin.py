@@ -11,10 +11,12 @@ import pytest
 from uav_fusion.core.bench.cache import uav_report_times
 from uav_fusion.core.bench.multi import crossings
 from uav_fusion.core.estimators import load_profile
-from uav_fusion.core.estimators.multi import GridEpoch, MultiTracker, run_multi
+from uav_fusion.core.estimators.grid import GridEpoch
+from uav_fusion.core.estimators.multi import MultiTracker, run_multi
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.records import Flight
-from uav_fusion.core.scoring.gospa import FlightSamples, UavTruth, score_flight
+from uav_fusion.core.scoring.gospa import UavTruth, score_flight
+from uav_fusion.core.scoring.outcomes import FlightSamples
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin.config import load_twin_config
 from uav_fusion.core.twin.generate import TwinFlight, generate_twin, twin_to_flight

@@ -11,15 +11,14 @@ import math
 import numpy as np
 import pytest
 
+from uav_fusion.core.scoring.continuity import fragmentations, id_switches
 from uav_fusion.core.scoring.gospa import (
     EpochTracks,
     GospaSettings,
     MultiScoreSettings,
     TrackEstimate,
     UavTruth,
-    fragmentations,
     gospa,
-    id_switches,
     pool,
     score_flight,
 )

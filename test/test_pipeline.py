@@ -10,8 +10,8 @@ import sys
 import numpy as np
 
 from uav_fusion.core.estimators.grid import Outputs
-from uav_fusion.core.estimators.profile import load_profile
 from uav_fusion.core.live.pipeline import Pipeline, PipelineConfig
+from uav_fusion.core.profiles.model import load_profile
 from uav_fusion.core.records import RADAR, RF, Measurement, RadarFrame, RadarTrack, RfAttempt
 
 T0 = 1.7e9
@@ -78,6 +78,8 @@ def failed(t: float) -> RfAttempt:
 
 
 def make(**kw: float) -> tuple[Pipeline, Sink]:
+    """A pipeline with a reorder window (2 s unless given)."""
+    kw.setdefault("reorder_window_s", 2.0)
     sink = Sink()
     pipe = Pipeline(sink.est, PipelineConfig(**kw), sink.warnings.append)  # type: ignore[arg-type]
     return pipe, sink
@@ -238,3 +240,42 @@ def test_estimator_restart_timeline_forgets_time() -> None:
     assert est.counters.get("reinit_clock_jump_back") == 1
     steps = est.process(Measurement(t=T0, source=RADAR, z=z, R=None))  # earlier: accepted
     assert steps[0].reason != "out_of_order" and est.active
+
+
+# --- zero wait --------------------------------------------------------------------------------
+def zero_wait(**kw: float) -> tuple[Pipeline, Sink]:
+    sink = Sink()
+    cfg = PipelineConfig(reorder_window_s=0.0, **kw)  # type: ignore[arg-type]
+    return Pipeline(sink.est, cfg, sink.warnings.append), sink  # type: ignore[arg-type]
+
+
+def test_zero_wait_fuses_every_input_on_arrival() -> None:
+    pl, _ = zero_wait()
+    pl.radar(radar(T0))
+    assert pl.estimator.processed == [(RADAR, T0)]  # type: ignore[attr-defined]
+    pl.rf([rf(T0 + 0.5)])
+    pl.radar(radar(T0 + 1))
+    assert pl.estimator.processed == [(RADAR, T0), (RF, T0 + 0.5), (RADAR, T0 + 1)]  # type: ignore[attr-defined]
+    assert pl.pending == 0 and not pl.dropped
+
+
+def test_zero_wait_late_input_is_refiltered_in_order() -> None:
+    pl, _ = zero_wait(max_lag_s=10.0)
+    for k in range(8):
+        pl.radar(radar(T0 + k))
+    pl.rf([rf(T0 + 2.5)])  # 5.5 s late: the estimator goes back and fuses it in its place
+    got = pl.estimator.processed  # type: ignore[attr-defined]
+    want = sorted([(RADAR, T0 + k) for k in range(8)] + [(RF, T0 + 2.5)], key=lambda p: p[1])
+    assert got == want and pl.rewinder is not None and pl.rewinder.rewinds == 1
+    assert not pl.dropped
+
+
+def test_zero_wait_input_beyond_max_lag_is_dropped_as_late_and_a_run_restarts() -> None:
+    pl, sink = zero_wait(max_lag_s=2.0, late_run_reset=3)
+    for k in range(10):
+        pl.radar(radar(T0 + k))
+    pl.rf([rf(T0 + 1.0)])  # 8 s behind: beyond the lag
+    assert pl.dropped == {"late_rf": 1} and not sink.restarts
+    pl.rf([rf(T0 + 1.5)])
+    pl.rf([rf(T0 + 2.0)])  # three late in a row: the input's time went back
+    assert pl.timeline_resets == 1 and sink.est.restarts == ["timeline_back"]

@@ -14,17 +14,16 @@ import yaml
 
 from uav_fusion.cli import main
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.keydoc import readme
-from uav_fusion.core.estimators.keys import BASES, FITTED
-from uav_fusion.core.estimators.multi_settings import MultiSettings
-from uav_fusion.core.estimators.objects import ScoreConfig
-from uav_fusion.core.estimators.profile import (
+from uav_fusion.core.profiles.checks import BASES, FITTED
+from uav_fusion.core.profiles.model import (
     Profile,
     load_profile,
     profile_files,
     profile_from_dict,
 )
-from uav_fusion.core.estimators.schema import KEYS, SECTIONS
+from uav_fusion.core.profiles.reference import readme
+from uav_fusion.core.profiles.schema import KEYS, SECTIONS
+from uav_fusion.core.profiles.settings import MultiSettings, ScoreConfig
 from uav_fusion.resources import config_path
 
 SHIPPED = ("paper", "tracker", "tracker_smoothed")

@@ -102,7 +102,7 @@ def test_every_executable_stops_cleanly_on_a_signal(sig: int, tmp_path: Path) ->
         assert "Traceback" not in outs[name], outs[name]
     # the startup line carries the effective parameters
     assert "rate=1.0" in outs["truth_replay"] and "use_sim_time=False" in outs["fusion_node"]
-    assert "reorder_window_s=2.0" in outs["fusion_node"]
+    assert "reorder_window_s=0.0" in outs["fusion_node"] and "max_lag_s=10.0" in outs["fusion_node"]
     assert (tmp_path / "rec" / "metadata.yaml").is_file()  # the recorder closed its bag
 
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from filterpy.kalman import rts_smoother
 
-from uav_fusion.core.estimators.filters import CvFilter, packed_arrays
-from uav_fusion.core.estimators.kalman import pack_r
+from uav_fusion.core.estimators.imm import packed_arrays
+from uav_fusion.core.estimators.kalman import CvFilter, pack_r
 from uav_fusion.core.estimators.models import cv_process_noise, cv_transition
 from uav_fusion.core.estimators.smoothing import Filtered, fixed_lag, rts
 

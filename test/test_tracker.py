@@ -16,10 +16,11 @@ import yaml
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import Profile, load_profile, run_flight
 from uav_fusion.core.estimators.base import feed
-from uav_fusion.core.estimators.components import FixedRadarR, RadarAlignment
-from uav_fusion.core.estimators.objects import ObjectTable, ScoreConfig
+from uav_fusion.core.estimators.objects import ObjectTable
 from uav_fusion.core.estimators.offline import run_tracker
+from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import Site, load_site
 
@@ -153,7 +154,7 @@ def test_tracker_profile_errors_name_file_and_key(
 
 
 def test_tracker_profiles_load_and_round_trip() -> None:
-    from uav_fusion.core.estimators.profile import profile_from_dict
+    from uav_fusion.core.profiles.model import profile_from_dict
 
     for name in ("tracker", "tracker_smoothed"):
         p = load_profile(name)
@@ -171,8 +172,8 @@ def test_tracker_profiles_load_and_round_trip() -> None:
 
 
 def test_an_imm_profile_runs_and_round_trips(tmp_path: Path, site: Site) -> None:
-    from uav_fusion.core.estimators.filters import ImmFilter
-    from uav_fusion.core.estimators.profile import profile_from_dict
+    from uav_fusion.core.estimators.imm import ImmFilter
+    from uav_fusion.core.profiles.model import profile_from_dict
 
     f = _edit_tracker(tmp_path, lambda d: d.update(motion=_imm()))
     p = load_profile(f)

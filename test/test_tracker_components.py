@@ -9,7 +9,16 @@ import numpy as np
 import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
-from uav_fusion.core.estimators.components import (
+from uav_fusion.core.estimators.imm import ImmFilter, packed_arrays
+from uav_fusion.core.estimators.kalman import CvFilter, pack_r
+from uav_fusion.core.estimators.models import (
+    cv_process_noise,
+    cv_transition,
+    kf_predict,
+    kf_update_joseph,
+    position_h,
+)
+from uav_fusion.core.estimators.parts import (
     CEP_PER_SIGMA,
     CepRfR,
     Deleter,
@@ -19,17 +28,8 @@ from uav_fusion.core.estimators.components import (
     RadarAlignment,
     StudentTWeight,
     packed_to_array,
-    validate_transition,
 )
-from uav_fusion.core.estimators.filters import CvFilter, ImmFilter, packed_arrays
-from uav_fusion.core.estimators.kalman import pack_r
-from uav_fusion.core.estimators.models import (
-    cv_process_noise,
-    cv_transition,
-    kf_predict,
-    kf_update_joseph,
-    position_h,
-)
+from uav_fusion.core.profiles.checks import validate_transition
 from uav_fusion.core.records import RadarFrame, RadarTrack
 
 RAD = math.radians

@@ -16,8 +16,8 @@ import pytest
 
 from uav_fusion.core.data import load_flight, uav_class
 from uav_fusion.core.estimators.offline import RunResult, run_flight
-from uav_fusion.core.estimators.profile import Profile, load_profile
 from uav_fusion.core.estimators.selection import largest_track_id
+from uav_fusion.core.profiles.model import Profile, load_profile
 from uav_fusion.core.records import RF, Flight
 from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import Site, load_site

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-from uav_fusion.core.estimators.profile import Profile, load_profile
+from uav_fusion.core.profiles.model import Profile, load_profile
 from uav_fusion.core.records import RadarFrame, RadarTrack
 from uav_fusion.core.site import Site, load_site
 

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from propkit import damaged_lines, examples
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.profiles.model import load_profile
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin.config import load_twin_config
 from uav_fusion.core.twin.trajectory import load_flight_plan

@@ -32,7 +32,7 @@ from uav_fusion.core.analysis import false_tracks, locks, misses, oracle
 from uav_fusion.core.analysis.labels import FlightSet
 from uav_fusion.core.bench.definition import SPLITS, load_definition
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.profile import Profile, load_profile
+from uav_fusion.core.profiles.model import Profile, load_profile
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 

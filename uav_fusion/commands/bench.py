@@ -46,7 +46,7 @@ from uav_fusion.core.bench.results import (
 )
 from uav_fusion.core.bench.single import GenerateTask, ScoreTask, generate_task, score_task
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.profile import Profile, load_profile, profile_path
+from uav_fusion.core.profiles.model import Profile, load_profile, profile_path
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
 

@@ -75,7 +75,7 @@ def _fmt(R: np.ndarray) -> str:
 
 def write_r_into_profile(path: Path, radar_R: np.ndarray, rf_R: np.ndarray, note: str) -> None:
     """Replace measurement.radar.R / measurement.rf.R (and the note) of a profile YAML."""
-    from uav_fusion.core.estimators.profile import profile_from_dict
+    from uav_fusion.core.profiles.model import profile_from_dict
 
     if not path.is_file():
         raise ConfigError(f"{path}: profile file not found")

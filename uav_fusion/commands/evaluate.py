@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import Any
 
 from uav_fusion.core.data import uav_class
 from uav_fusion.core.errors import ConfigError
@@ -55,8 +56,13 @@ def evaluate_flight(
     tolerance_s: float = 1.0,
     max_truth_gap_s: float = 2.0,
     raw_min_uav_prob: float | None = None,
+    arrivals: Path | None = None,
 ) -> tuple[Evaluation, dict[str, str]]:
     """Run the estimator on ``flight`` and score every stage; returns (evaluation, run info).
+
+    ``arrivals``: an arrival schedule (:mod:`uav_fusion.core.live.schedule`); the inputs are
+    then fused in that order with zero wait, and the steps scored are those a live node
+    published (each at its arrival), as its evaluator scores them.
 
     The raw radar row takes the reports of the tracks whose mean ``catProb[0]`` reaches
     ``raw_min_uav_prob``, or the profile's ``evaluation.raw_radar_min_mean_uav_prob`` when
@@ -73,6 +79,16 @@ def evaluate_flight(
         raise ConfigError(str(exc)) from None
     t_start = time.perf_counter()
     result = est.run_flight(flight, profile, site)
+    steps: list[Any] = list(result.steps)
+    if arrivals is not None:
+        from uav_fusion.core.live.rewind import simulate
+        from uav_fusion.core.live.schedule import read_schedule
+
+        def make() -> Any:
+            return est.make_estimator(profile, site, live=True)
+
+        order = read_schedule(arrivals, make().flight_input(flight))
+        steps = list(simulate(make, order)[2])
     elapsed = time.perf_counter() - t_start
     measurements: list[Measurement] = []
     for item in est.flight_measurements(flight, profile, site):
@@ -86,13 +102,14 @@ def evaluate_flight(
         profile.raw_radar_min_mean_uav_prob if raw_min_uav_prob is None else raw_min_uav_prob
     )
     feed_flight(ev, flight, uav_class.uav_class_tracks(flight.radar, raw_thr))
-    feed_steps(ev, result.steps, measurements)
+    feed_steps(ev, steps, measurements)
     info = {
         "mode": "offline (uav_fusion evaluate)",
         "flight": f"{flight.name} ({flight.folder})" if flight.folder else flight.name,
         "profile": profile_name,
         "site": str(site.source or site.name),
-        "filter run": f"{len(result.steps)} steps in {elapsed:.2f} s",
+        "filter run": f"{len(result.steps)} steps in {elapsed:.2f} s"
+        + ("" if arrivals is None else f" (in the arrival order of {arrivals})"),
         "raw radar row": "every radar report"
         if raw_thr is None
         else f"reports of radar tracks with mean UAV class probability >= {raw_thr:g}",

@@ -12,8 +12,8 @@ import sys
 
 import yaml
 
-from uav_fusion.core.estimators.keydoc import readme
-from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.profiles.model import load_profile
+from uav_fusion.core.profiles.reference import readme
 
 HELP = "profile reference (doc) and resolved profiles (show NAME)"
 

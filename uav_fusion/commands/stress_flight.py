@@ -20,7 +20,7 @@ from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_f
 from uav_fusion.core.bench.definition import BenchDefinition, load_definition
 from uav_fusion.core.bench.single import ScoreTask, score_task
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.profile import load_profile
+from uav_fusion.core.profiles.model import load_profile
 from uav_fusion.core.scoring.fixed_rate import GridScore, format_value, pool
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path

@@ -48,6 +48,20 @@ def _abs(topic: str) -> str:
     return topic if topic.startswith("/") else "/" + topic
 
 
+def _parse_remap(items: Sequence[Any]) -> dict[str, str]:
+    """The ``remap`` parameter's ``from:=to`` entries (empty ones skipped), topic names
+    made absolute."""
+    remap: dict[str, str] = {}
+    for item in items:
+        if not item:
+            continue
+        src, sep, dst = str(item).partition(":=")
+        if not sep or not src or not dst:
+            raise ConfigError(f"bag_player: remap entry '{item}' is not 'from:=to'")
+        remap[_abs(src.strip())] = _abs(dst.strip())
+    return remap
+
+
 def _desc(text: str, kind: int) -> ParameterDescriptor:
     return ParameterDescriptor(description=text, type=kind)
 
@@ -61,6 +75,65 @@ class BagPlayer(Node):
 
     def __init__(self, bag: str | None = None, **kwargs: Any) -> None:
         super().__init__("bag_player", **kwargs)
+        self._declare_parameters(bag)
+        g = self.get_parameter
+        path = str(g("bag").value)
+        if not path:
+            raise ConfigError("bag_player: no bag given (positional path or -p bag:=PATH)")
+        self.rate = float(g("rate").value)
+        if not self.rate > 0:
+            raise ConfigError(f"bag_player: rate must be > 0, got {self.rate}")
+        self.loop = bool(g("loop").value)
+        self.loop_count = int(g("loop_count").value)
+        self.wait_for_subs = bool(g("wait_for_subscribers").value)
+        self.wait_timeout = float(g("wait_timeout").value)
+        self.clock_hz = float(g("clock_hz").value)
+        depth = int(g("qos_depth").value)
+        if depth < 1:
+            raise ConfigError(f"bag_player: qos_depth must be >= 1, got {depth}")
+        reliability = str(g("qos_reliability").value).strip().lower()
+        if reliability not in {"", "reliable", "best_effort"}:
+            raise ConfigError(f"bag_player: qos_reliability '{reliability}' is not "
+                              "'reliable', 'best_effort' or ''")
+        remap = _parse_remap(g("remap").value or [])
+        wanted = {_abs(str(t)) for t in (g("topics").value or []) if t}
+
+        self.reader = BagReader(path)
+        for w in self.reader.warnings:
+            self.get_logger().warning(w)
+        unknown = wanted - {_abs(t) for t in self.reader.topics}
+        if unknown:
+            raise ConfigError(f"bag_player: topics not in {path}: {', '.join(sorted(unknown))}")
+
+        self.skipped: dict[str, str] = {}
+        self._pubs: dict[str, Publisher] = {}  # bag topic name -> publisher
+        self._out: dict[str, str] = {}  # bag topic name -> output topic
+        publish_clock = bool(g("publish_clock").value)
+        self._open_publishers(wanted, remap, publish_clock, reliability, depth)
+        if not self._pubs:
+            raise UavFusionError(f"bag_player: nothing to play in {path}"
+                                 + (f" ({'; '.join(self.skipped.values())})" if self.skipped
+                                    else ""))
+        self._clock_pub = (
+            self.create_publisher(Clock, "/clock", CLOCK_QOS)
+            if publish_clock else None
+        )
+        start = self.reader.start_ns + int(float(g("start_offset").value) * 1e9)
+        dur = float(g("duration").value)
+        self.start_ns = start
+        self.end_ns = start + int(dur * 1e9) if dur > 0 else None
+        self.played: Counter[str] = Counter()
+        self.passes = 0
+        self.finished = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.error: str | None = None
+        self.ack_wait_s = 0.0
+        self.summary = ""
+        self._t_begin = 0.0
+        self._last_clock: int | None = None
+
+    def _declare_parameters(self, bag: str | None) -> None:
         p = self.declare_parameter
         p("bag", bag or "", _desc("bag directory, .mcap or .db3", ParameterType.PARAMETER_STRING))
         p("rate", 1.0, _desc("playback speed factor (> 0)", ParameterType.PARAMETER_DOUBLE))
@@ -87,46 +160,16 @@ class BagPlayer(Node):
         p("clock_hz", 50.0, _desc("/clock rate between messages (0: only at messages)",
                                   ParameterType.PARAMETER_DOUBLE))
 
-        g = self.get_parameter
-        path = str(g("bag").value)
-        if not path:
-            raise ConfigError("bag_player: no bag given (positional path or -p bag:=PATH)")
-        self.rate = float(g("rate").value)
-        if not self.rate > 0:
-            raise ConfigError(f"bag_player: rate must be > 0, got {self.rate}")
-        self.loop = bool(g("loop").value)
-        self.loop_count = int(g("loop_count").value)
-        self.wait_for_subs = bool(g("wait_for_subscribers").value)
-        self.wait_timeout = float(g("wait_timeout").value)
-        self.clock_hz = float(g("clock_hz").value)
-        depth = int(g("qos_depth").value)
-        if depth < 1:
-            raise ConfigError(f"bag_player: qos_depth must be >= 1, got {depth}")
-        reliability = str(g("qos_reliability").value).strip().lower()
-        if reliability not in {"", "reliable", "best_effort"}:
-            raise ConfigError(f"bag_player: qos_reliability '{reliability}' is not "
-                              "'reliable', 'best_effort' or ''")
-        remap: dict[str, str] = {}
-        for item in g("remap").value or []:
-            if not item:
-                continue
-            src, sep, dst = str(item).partition(":=")
-            if not sep or not src or not dst:
-                raise ConfigError(f"bag_player: remap entry '{item}' is not 'from:=to'")
-            remap[_abs(src.strip())] = _abs(dst.strip())
-        wanted = {_abs(str(t)) for t in (g("topics").value or []) if t}
-
-        self.reader = BagReader(path)
-        for w in self.reader.warnings:
-            self.get_logger().warning(w)
-        unknown = wanted - {_abs(t) for t in self.reader.topics}
-        if unknown:
-            raise ConfigError(f"bag_player: topics not in {path}: {', '.join(sorted(unknown))}")
-
-        self.skipped: dict[str, str] = {}
-        self._pubs: dict[str, Publisher] = {}  # bag topic name -> publisher
-        self._out: dict[str, str] = {}  # bag topic name -> output topic
-        publish_clock = bool(g("publish_clock").value)
+    def _open_publishers(
+        self,
+        wanted: set[str],
+        remap: dict[str, str],
+        publish_clock: bool,
+        reliability: str,
+        depth: int,
+    ) -> None:
+        """A publisher per played topic (``wanted``, or every topic with messages); the
+        others that cannot be played are listed in :attr:`skipped`, with the reason."""
         for t in self.reader.topics.values():
             if wanted and _abs(t.name) not in wanted:
                 continue
@@ -149,28 +192,6 @@ class BagPlayer(Node):
         for name, why in self.skipped.items():
             self.get_logger().warning(
                 f"skipping {name} ({self.reader.topics[name].count} messages): {why}")
-        if not self._pubs:
-            raise UavFusionError(f"bag_player: nothing to play in {path}"
-                                 + (f" ({'; '.join(self.skipped.values())})" if self.skipped
-                                    else ""))
-        self._clock_pub = (
-            self.create_publisher(Clock, "/clock", CLOCK_QOS)
-            if publish_clock else None
-        )
-        start = self.reader.start_ns + int(float(g("start_offset").value) * 1e9)
-        dur = float(g("duration").value)
-        self.start_ns = start
-        self.end_ns = start + int(dur * 1e9) if dur > 0 else None
-        self.played: Counter[str] = Counter()
-        self.passes = 0
-        self.finished = threading.Event()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.error: str | None = None
-        self.ack_wait_s = 0.0
-        self.summary = ""
-        self._t_begin = 0.0
-        self._last_clock: int | None = None
 
     @staticmethod
     def _qos(topic: BagTopic, reliability: str, depth: int) -> QoSProfile:

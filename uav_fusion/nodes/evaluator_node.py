@@ -8,8 +8,9 @@ Subscribes (topic names are parameters; defaults from docs/graph.md):
 - ``fusion/accepted/radar``, ``fusion/accepted/rf``: the measurements the filter accepted;
 - ``fusion/odom/updated``, ``fusion/odom/coasted`` (nav_msgs/Odometry): the filter's steps;
 - with ``grid_topic`` set (e.g. ``fusion/odom`` of a tracker profile): the fixed-rate output,
-  scored on its grid (``grid_hz``) like the accuracy benchmark (:mod:`uav_fusion.core.
-  scoring.fixed_rate`: coverage of the airborne epochs, error mean / p95 / max, gross share, ANEES);
+  scored on its grid (``grid_hz``) like the accuracy benchmark
+  (:mod:`uav_fusion.core.scoring.fixed_rate`: coverage of the airborne epochs, error mean /
+  p95 / max, gross share, ANEES);
   the figures go into the report's header and metrics.json. A message off the grid is
   counted (``off_grid``) and not scored;
 - with ``tracks_topic`` set (``fusion/tracks`` of a fusion node running the multi-UAV
@@ -22,12 +23,13 @@ Subscribes (topic names are parameters; defaults from docs/graph.md):
   last one (the report), or to the last track message (the periodic log and /diagnostics),
   are scored; an epoch without a message has no track.
 
-Every message goes into a :class:`uav_fusion.core.scoring.evaluation.Evaluator`; nothing is
-scored on arrival, so estimates that arrive before the truth bracketing them are scored
-exactly once
-the report is made. Malformed messages (NaN, wrong frame, zero stamp, bad covariance) are
-counted by topic and reason and dropped. Every ``log_period_s`` the node logs a summary line
-and publishes the rows on ``/diagnostics``. The report (report.md, metrics.csv,
+Every message goes into a :class:`uav_fusion.core.scoring.evaluation.Evaluator` (the
+fixed-rate output and the tracks are kept as received and scored by
+:mod:`uav_fusion.core.scoring.published`); nothing is scored on arrival, so estimates that
+arrive before the truth bracketing them are scored exactly once the report is made.
+Malformed messages (NaN, wrong frame, zero stamp, bad covariance) are counted by topic and
+reason and dropped. Every ``log_period_s`` the node logs a summary line and publishes the
+rows on ``/diagnostics``. The report (report.md, metrics.csv,
 metrics.json, figures) is written to ``output_dir`` when the ``~/write_report`` service
 (std_srvs/Trigger) is called and, if ``write_on_shutdown`` is true, when the node stops.
 
@@ -51,31 +53,28 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
-from uav_fusion.core.data import fmt_utc, load_flight
 from uav_fusion.core.errors import UavFusionError
-from uav_fusion.core.estimators.grid import grid_from_published, on_grid
 from uav_fusion.core.scoring.evaluation import COASTED, UPDATED, Evaluation, Evaluator, rows_summary
-from uav_fusion.core.scoring.fixed_rate import FlightTruth, GridScore, score_grid
-from uav_fusion.core.scoring.fixed_rate import pool as pool_grid
-from uav_fusion.core.scoring.gospa import (
-    MultiScore,
-    MultiScoreSettings,
-    UavTruth,
-    epochs_from_published,
-    multi_summary,
-    score_flight,
+from uav_fusion.core.scoring.fixed_rate import GridScore, on_grid
+from uav_fusion.core.scoring.outcomes import MultiScore, multi_summary
+from uav_fusion.core.scoring.published import (
+    gap_text,
+    rcs_key,
+    rcs_lookup,
+    score_published_grid,
+    score_published_tracks,
+    step_gaps,
 )
-from uav_fusion.core.scoring.gospa import pool as pool_multi
 from uav_fusion.core.scoring.report import ReportFiles, write_report
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.ros.app import run_node
@@ -87,9 +86,8 @@ from uav_fusion.ros.conversions import (
     navsatfix_to_truth,
     odometry_to_state,
     time_from_stamp,
-    time_to_ns,
 )
-from uav_fusion.ros.diagnostics import make_status
+from uav_fusion.ros.diagnostics import evaluation_statuses, make_status, tracks_status
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import stream_qos
 
@@ -150,24 +148,6 @@ PARAMS: tuple[Param, ...] = (
 )
 
 
-def _rcs_key(t: float, e: float, n: float) -> tuple[int, int, int]:
-    """A radar report's identity: its stamp (ns) and horizontal position (mm)."""
-    return time_to_ns(t), round(float(e) * 1000.0), round(float(n) * 1000.0)
-
-
-def _rcs_lookup(flight_dir: str, site: Site) -> dict[tuple[int, int, int], float]:
-    """RCS (dBsm) of every radar report of a flight folder, keyed by :func:`_rcs_key`."""
-    if not flight_dir:
-        return {}
-    flight = load_flight(flight_dir, site)
-    return {
-        _rcs_key(trk.t, trk.e, trk.n): trk.rcs_dbsm
-        for frame in flight.radar
-        for trk in frame.tracks
-        if trk.rcs_dbsm is not None
-    }
-
-
 class EvaluatorNode(Node):
     """Feeds an :class:`Evaluator` from the live graph and writes the report on request."""
 
@@ -216,7 +196,7 @@ class EvaluatorNode(Node):
         try:
             self.site: Site = load_site(site_file or None)
             self.evaluator = self._new_evaluator()
-            self._rcs = _rcs_lookup(str(v["rcs_flight_dir"]), self.site)
+            self._rcs = rcs_lookup(str(v["rcs_flight_dir"]), self.site)
         except (UavFusionError, ValueError) as exc:
             raise UavFusionError(f"{NODE_NAME}: bad parameters: {exc}") from None
         self.frame_id = frame or self.site.frame_id
@@ -229,29 +209,8 @@ class EvaluatorNode(Node):
         self._lock = threading.Lock()
         self.last_report: ReportFiles | None = None
 
-        qos = stream_qos(depth)
-        self.create_subscription(NavSatFix, self.truth_topic, self._on_truth, qos)
-        self.create_subscription(
-            PoseWithCovarianceStamped, self.radar_raw_topic, self._on_radar_raw, qos
-        )
-        self.create_subscription(PointStamped, self.rf_topic, self._on_rf, qos)
-        self.create_subscription(
-            PoseWithCovarianceStamped, self.accepted_radar_topic, self._on_accepted_radar, qos
-        )
-        self.create_subscription(PointStamped, self.accepted_rf_topic, self._on_accepted_rf, qos)
-        self.create_subscription(Odometry, self.updated_topic, self._on_updated, qos)
-        self.create_subscription(Odometry, self.coasted_topic, self._on_coasted, qos)
-        if self.grid_topic:
-            self.create_subscription(Odometry, self.grid_topic, self._on_grid, qos)
-        self._qos = qos
-        if self.tracks_topic:
-            self.create_subscription(Odometry, self.tracks_topic, self._on_tracks, qos)
-            for name in self.vehicles_listed:
-                self._subscribe_vehicle(name)
-            if not self.vehicles_listed:
-                self.create_timer(
-                    0.5, self._discover_vehicles, clock=Clock(clock_type=ClockType.STEADY_TIME)
-                )
+        self._qos = stream_qos(depth)
+        self._subscribe_inputs(self._qos)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(Trigger, "~/write_report", self._on_write_report)
         self._logged_at = -1
@@ -265,6 +224,31 @@ class EvaluatorNode(Node):
             f"scoring against truth on '{self.truth_topic}' in frame '{self.frame_id}'; "
             f"report -> {self.output_dir} (service ~/write_report)"
         )
+
+    def _subscribe_inputs(self, qos: QoSProfile) -> None:
+        """Every input topic (module text); with ``tracks_topic``, the listed vehicles' truth,
+        or a timer that subscribes each vehicle's truth topic as it appears."""
+        self.create_subscription(NavSatFix, self.truth_topic, self._on_truth, qos)
+        self.create_subscription(
+            PoseWithCovarianceStamped, self.radar_raw_topic, self._on_radar_raw, qos
+        )
+        self.create_subscription(PointStamped, self.rf_topic, self._on_rf, qos)
+        self.create_subscription(
+            PoseWithCovarianceStamped, self.accepted_radar_topic, self._on_accepted_radar, qos
+        )
+        self.create_subscription(PointStamped, self.accepted_rf_topic, self._on_accepted_rf, qos)
+        self.create_subscription(Odometry, self.updated_topic, self._on_updated, qos)
+        self.create_subscription(Odometry, self.coasted_topic, self._on_coasted, qos)
+        if self.grid_topic:
+            self.create_subscription(Odometry, self.grid_topic, self._on_grid, qos)
+        if self.tracks_topic:
+            self.create_subscription(Odometry, self.tracks_topic, self._on_tracks, qos)
+            for name in self.vehicles_listed:
+                self._subscribe_vehicle(name)
+            if not self.vehicles_listed:
+                self.create_timer(
+                    0.5, self._discover_vehicles, clock=Clock(clock_type=ClockType.STEADY_TIME)
+                )
 
     def _new_evaluator(self) -> Evaluator:
         return Evaluator(
@@ -343,20 +327,11 @@ class EvaluatorNode(Node):
         """The fixed-rate output received so far, scored on its grid against the truth
         (None without ``grid_topic`` or without truth)."""
         with self._lock:
-            truth = sorted(self._truth_h)
-            grid_msgs = sorted(self._grid, key=lambda g: g[0])
-        if not self.grid_topic or len(truth) < 2:
+            truth = list(self._truth_h)
+            grid_msgs = list(self._grid)
+        if not self.grid_topic:
             return None
-        t = np.array([r[0] for r in truth])
-        keep = np.concatenate(([True], np.diff(t) > 0))
-        arr = np.array(truth)[keep]
-        ft = FlightTruth(arr[:, 0], arr[:, 1:4], arr[:, 4] - self.site.takeoff_h)
-        t0, t1 = ft.span
-        grid = grid_from_published(
-            [g[0] for g in grid_msgs], [g[1] for g in grid_msgs], [g[2] for g in grid_msgs],
-            self.grid_hz, t0, t1,
-        )  # fmt: skip
-        return pool_grid([score_grid(grid, ft)])
+        return score_published_grid(truth, grid_msgs, self.grid_hz, self.site.takeoff_h)
 
     # --- multi-target scoring ------------------------------------------------------------
     @property
@@ -412,30 +387,15 @@ class EvaluatorNode(Node):
         without ``tracks_topic`` or without a vehicle with two truth samples). ``final``:
         up to the last truth sample; otherwise up to the last track message."""
         with self._lock:
-            truth = {k: sorted(v) for k, v in self._vehicle_truth.items()}
+            truth = {k: list(v) for k, v in self._vehicle_truth.items()}
             tracks = list(self._tracks)
         if not self.tracks_topic:
             return None
-        truths: dict[str, UavTruth] = {}
-        for name, rows in truth.items():
-            arr = np.array(rows, dtype=float).reshape(-1, 4)
-            if arr.shape[0]:
-                arr = arr[np.concatenate(([True], np.diff(arr[:, 0]) > 0))]
-            if arr.shape[0] >= 2:
-                truths[name] = UavTruth(t=arr[:, 0], enu=arr[:, 1:4])
-        if not truths:
-            return None
-        t0 = min(float(tr.t[0]) for tr in truths.values())
-        t1 = max(float(tr.t[-1]) for tr in truths.values())
-        if not final:
-            t1 = min(t1, max((t for t, _, _ in tracks), default=t0))
-        epochs = epochs_from_published(tracks, self.tracks_hz, t0, t1)
-        settings = MultiScoreSettings(step_s=1.0 / self.tracks_hz)
-        return pool_multi([score_flight(truths, epochs, settings)])
+        return score_published_tracks(truth, tracks, self.tracks_hz, final)
 
     def _radar_raw(self, msg: PoseWithCovarianceStamped) -> bool:
         m = msg_to_radar_measurement(msg, self.frame_id)
-        rcs = self._rcs.get(_rcs_key(m.t, m.z[0], m.z[1])) if self._rcs else None
+        rcs = self._rcs.get(rcs_key(m.t, m.z[0], m.z[1])) if self._rcs else None
         e, n, u = (float(v) for v in m.z)
         return self.evaluator.add_radar_report(m.t, e, n, u, rcs_dbsm=rcs)
 
@@ -512,14 +472,7 @@ class EvaluatorNode(Node):
     def diagnostics(self, ev: Evaluation) -> DiagnosticArray:
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        for r in ev.rows:
-            arr.status.append(make_status(
-                f"{self.get_name()}: {r.spec.label}",
-                f"n={r.stats.count} mean={_num(r.stats.mean)} m "
-                f"coverage={_num(r.stats.coverage_pct)} %",
-                ((str(k), str(v)) for k, v in r.as_dict().items()
-                 if k not in ("key", "label", "group")),
-            ))
+        arr.status.extend(evaluation_statuses(self.get_name(), ev))
         n_drop = sum(ev.dropped.values())
         counts = [("received", self.received), ("used", self.used),
                   ("refused", self.refused), ("dropped", ev.dropped)]
@@ -527,17 +480,7 @@ class EvaluatorNode(Node):
         values.append(("fused step gaps", self.gap_text(ev)))
         ms = self.multi_score(final=False)
         if ms is not None:
-            arr.status.append(make_status(
-                f"{self.get_name()}: tracks",
-                f"GOSPA mean {_num(ms.gospa_mean_m)} m, coverage {_num(ms.coverage_pct)} %",
-                [("vehicles", ", ".join(u.name for u in ms.uavs)),
-                 ("epochs", str(ms.epochs)), ("GOSPA mean m", _num(ms.gospa_mean_m)),
-                 ("coverage %", _num(ms.coverage_pct)), ("id switches", str(ms.id_switches)),
-                 ("id switches, kept correspondence", str(ms.id_switches_kept)),
-                 ("false-track s", _num(ms.false_track_s)),
-                 ("tracks on grounded UAVs s", _num(ms.excused_track_s))]
-                + [(f"{u.name} coverage %", _num(u.coverage_pct)) for u in ms.uavs],
-            ))
+            arr.status.append(tracks_status(self.get_name(), ms))
         values.append(("clock jumps back", str(self.clock_jumps_back)))
         arr.status.append(make_status(
             f"{self.get_name()}: inputs",
@@ -556,18 +499,10 @@ class EvaluatorNode(Node):
 
     def step_gaps(self, ev: Evaluation) -> list[tuple[float, float]]:
         """(start, end) of every gap between fused steps longer than ``step_gap_s``."""
-        t = ev.samples["kf_all"].t
-        if t.size < 2:
-            return []
-        gaps = np.flatnonzero(np.diff(t) > self.step_gap_s)
-        return [(float(t[i]), float(t[i + 1])) for i in gaps]
+        return step_gaps(ev.samples["kf_all"].t, self.step_gap_s)
 
     def gap_text(self, ev: Evaluation) -> str:
-        gaps = self.step_gaps(ev)
-        if not gaps:
-            return f"none longer than {self.step_gap_s:g} s"
-        parts = [f"{b - a:.1f} s from {fmt_utc(a)} to {fmt_utc(b)}" for a, b in gaps]
-        return f"{len(gaps)} longer than {self.step_gap_s:g} s: " + "; ".join(parts)
+        return gap_text(self.step_gaps(ev), self.step_gap_s)
 
     def write_report(self, folder: Path | None = None) -> ReportFiles:
         """Score everything received so far and write the report to ``output_dir``."""
@@ -617,10 +552,6 @@ class EvaluatorNode(Node):
         response.message = str(files.markdown)
         self.get_logger().info(f"report written to {files.folder}")
         return response
-
-
-def _num(v: float) -> str:
-    return "-" if not math.isfinite(v) else f"{v:.1f}"
 
 
 def _with_dropped(ev: Evaluation, dropped: dict[str, int]) -> Evaluation:

@@ -5,9 +5,10 @@ The node only wires three parts together:
 - :mod:`uav_fusion.ros.fusion_input`: each message to core records, with its checks and
   drop accounting (the inputs depend on what the estimator reads: ``radar/pose`` + ``rf/fix``
   for the paper's filter, ``radar/tracks`` + ``rf/fixes`` for the trackers);
-- :mod:`uav_fusion.core.live.pipeline`: time order (reorder window, duplicates, future
-  stamps, clock jumps), then the estimator (:mod:`uav_fusion.core.estimators.base`: the
-  profile's ``estimator``, or the ``estimator`` parameter);
+- :mod:`uav_fusion.core.live.pipeline`: time order (zero wait with late data re-filtered, or
+  a reorder window; duplicates, future stamps, clock jumps), then the estimator
+  (:mod:`uav_fusion.core.estimators.base`: the profile's ``estimator``, or the ``estimator``
+  parameter);
 - :mod:`uav_fusion.ros.fusion_output`: publishers, views and diagnostics.
 
 Timers: a 0.1 s tick follows the simulated clock, flushes the buffer after ``idle_flush_s`` of
@@ -32,14 +33,14 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import Trigger
 
-from uav_fusion.core.estimators import ESTIMATORS, load_profile, make_estimator
+from uav_fusion.core.estimators import ESTIMATORS, Estimator, load_profile, make_estimator
 from uav_fusion.core.estimators.grid import Outputs
 from uav_fusion.core.live.pipeline import Pipeline, PipelineConfig
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.site import load_site
 from uav_fusion.ros.app import run_node
 from uav_fusion.ros.conversions import ns_to_time
-from uav_fusion.ros.fusion_input import FusionInput, InputTopics
+from uav_fusion.ros.fusion_input import ArrivalLog, FusionInput, InputTopics
 from uav_fusion.ros.fusion_output import FusionOutput, OutputTopics, ViewSettings
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import stream_qos
@@ -100,9 +101,22 @@ def fusion_params() -> list[Param]:
               "profiles with a finite smoother.lag_s: every step, fixed-lag smoothed"),
         topic("flush_service", "fusion/flush", "std_srvs/Trigger: flush the reorder buffer"),
         Param(
-            "reorder_window_s", 2.0,
-            "sensor seconds a measurement may arrive late and still be processed in order",
-            lo=0.001, hi=3600.0,
+            "reorder_window_s", 0.0,
+            "0: fuse every measurement the moment it arrives, a late one by rewinding and "
+            "re-filtering (max_lag_s); > 0: hold measurements this many sensor seconds to "
+            "process them in order without rewinding",
+            lo=0.0, hi=3600.0,
+        ),
+        Param(
+            "max_lag_s", 10.0,
+            "reorder_window_s 0: sensor seconds a measurement may arrive late and still be "
+            "fused exactly (older: dropped as late)",
+            lo=0.0, hi=3600.0,
+        ),
+        Param(
+            "arrivals_file", "",
+            "write the arrival schedule here (CSV source,stamp,arrival; '' = none): "
+            "uav_fusion run --arrivals reproduces the node's outputs from it",
         ),
         Param(
             "use_message_covariance", True,
@@ -150,8 +164,9 @@ def fusion_params() -> list[Param]:
         ),
         Param(
             "late_run_reset", 50,
-            "this many messages in a row that are late for the reorder window or repeats mean "
-            "the input timeline went back: reset the filter and the buffer (0 = never)",
+            "this many messages in a row that are late (max_lag_s or the reorder window) or "
+            "repeats mean the input timeline went back: reset the filter and the buffer "
+            "(0 = never)",
             lo=0, hi=1000000,
         ),
         Param(
@@ -171,25 +186,27 @@ class FusionNode(Node):
         p = self.p = declare_all(self, fusion_params())
         self.site = load_site(p["site_file"] or None)
         self.profile = load_profile(p["profile"])
-        self.estimator = make_estimator(
+        estimator = make_estimator(
             self.profile, self.site, float(p["frequency"]), kind=p["estimator"] or None, live=True
         )
         frame = str(p["world_frame"] or self.site.frame_id)
         warn = self.get_logger().warning
         self.input = FusionInput(
-            self.estimator.reads, frame,
+            estimator.reads, frame,
             InputTopics(p["radar_topic"], p["rf_topic"], p["radar_tracks_topic"],
                         p["rf_fixes_topic"]),
             warn,
             use_message_covariance=bool(p["use_message_covariance"]),
+            arrivals=ArrivalLog(p["arrivals_file"]) if p["arrivals_file"] else None,
             monitor={"min_hz": float(p["input_min_hz"]), "max_hz": float(p["input_max_hz"]),
                      "min_delay_s": float(p["stamp_delay_min_s"]),
                      "max_delay_s": float(p["stamp_delay_max_s"])},
         )  # fmt: skip
         self.pipeline = Pipeline(
-            self.estimator,
+            estimator,
             PipelineConfig(
                 reorder_window_s=float(p["reorder_window_s"]),
+                max_lag_s=float(p["max_lag_s"]),
                 max_future_s=float(p["max_future_s"]),
                 late_run_reset=int(p["late_run_reset"]),
                 clock_jump_back_s=float(p["clock_jump_back_s"]),
@@ -199,7 +216,7 @@ class FusionNode(Node):
         gate = self.profile.range_gate_m
         qos = stream_qos(int(p["qos_depth"]))
         self.output = FusionOutput(
-            self, self.estimator, self.site, frame, str(p["child_frame_id"]),
+            self, self.pipeline, self.site, frame, str(p["child_frame_id"]),
             OutputTopics(p["odom_topic"], p["updated_topic"], p["coasted_topic"],
                          p["accepted_radar_topic"], p["accepted_rf_topic"], p["fix_topic"],
                          p["smoothed_topic"], p["tracks_topic"], p["path_topic"],
@@ -228,12 +245,16 @@ class FusionNode(Node):
         self._diag_timer = self.create_timer(
             float(p["diagnostics_period_s"]), self.publish_diagnostics, clock=steady
         )
-        est = self.estimator
-        mode = f", fixed-rate output at {float(p['frequency']):g} Hz" if est.fixed_rate else ""
+        hz = float(p["frequency"])
+        mode = f", fixed-rate output at {hz:g} Hz" if estimator.fixed_rate else ""
+        order = (
+            f"zero wait (late data re-filtered up to {float(p['max_lag_s']):g} s)"
+            if self.pipeline.rewinder is not None
+            else f"reorder window {self.pipeline.buffer.window_s:g} s"
+        )
         self.get_logger().info(
             f"fusing {inp.radar_topic} + {inp.rf_topic} with profile '{self.profile.name}' "
-            f"(estimator {est.kind}{mode}), reorder window "
-            f"{self.pipeline.buffer.window_s:g} s"
+            f"(estimator {estimator.kind}{mode}), {order}"
         )
 
     # --- what tests and tools read --------------------------------------------------------
@@ -246,6 +267,11 @@ class FusionNode(Node):
     def dropped(self) -> Counter[str]:
         """Every drop by ``<source>_<reason>`` (and ``late_<source>``)."""
         return self.input.dropped + self.pipeline.dropped
+
+    @property
+    def estimator(self) -> Estimator:
+        """The estimator (zero wait: the one the latest rewind went back to)."""
+        return self.pipeline.estimator
 
     @property
     def steps_published(self) -> int:
@@ -358,6 +384,8 @@ class FusionNode(Node):
             if (self.pipeline.pending or self.pipeline.holding) and self.context.ok():
                 self.flush()
         finally:
+            if self.input.arrivals is not None:
+                self.input.arrivals.close()
             super().destroy_node()
 
 

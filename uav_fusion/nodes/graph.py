@@ -156,9 +156,10 @@ class Graph:
 
         Inside a batch the executor may take one topic's messages before another's, so a
         stream can lag by up to the span; a replay's ``delay_s`` adds to that. Both must
-        stay inside the fusion node's reorder window: span <= (window - largest delay) / 2.
+        stay inside what the fusion node takes late (its reorder window, or with zero wait
+        ``max_lag_s``): span <= (that - largest delay) / 2.
         """
-        window = float(self.fusion.p["reorder_window_s"])
+        window = float(self.fusion.p["reorder_window_s"]) or float(self.fusion.p["max_lag_s"])
         delay = max(float(r.p["delay_s"]) for r in (self.truth, self.rf, self.radar))
         return max(0.01, min(float(self.truth.p["batch_span_s"]), 0.5 * (window - delay)))
 

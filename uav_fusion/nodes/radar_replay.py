@@ -30,13 +30,13 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import PointCloud2
 
-from uav_fusion.core.estimators.profile import SELECTIONS
 from uav_fusion.core.estimators.selection import (
     radar_profile,
     raw_radar_reports,
     report_covariance,
     selected_radar,
 )
+from uav_fusion.core.profiles.model import SELECTIONS
 from uav_fusion.ros import conversions as cv
 from uav_fusion.ros.params import Param
 from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param

@@ -1,5 +1,6 @@
-"""``diagnostic_msgs/DiagnosticStatus`` entries as the fusion and evaluator nodes publish them,
-and the per-input rate and stamp-delay checks (:class:`InputMonitor`)."""
+"""``diagnostic_msgs/DiagnosticStatus`` entries as the fusion and evaluator nodes publish them
+(the evaluator's scores: :func:`evaluation_statuses`, :func:`tracks_status`), and the per-input
+rate and stamp-delay checks (:class:`InputMonitor`)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,13 @@ import math
 import time
 from collections import deque
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+if TYPE_CHECKING:
+    from uav_fusion.core.scoring.evaluation import Evaluation
+    from uav_fusion.core.scoring.outcomes import MultiScore
 
 HARDWARE_ID = "uav_fusion"
 
@@ -142,3 +148,36 @@ class InputMonitor:
 
 def _fmt(v: float) -> str:
     return f"{v:.6g}" if math.isfinite(v) else "n/a"
+
+
+def _num(v: float) -> str:
+    return "-" if not math.isfinite(v) else f"{v:.1f}"
+
+
+def evaluation_statuses(name: str, ev: Evaluation) -> list[DiagnosticStatus]:
+    """The evaluator node's Table II: one status per row, named ``<name>: <row label>``."""
+    return [
+        make_status(
+            f"{name}: {r.spec.label}",
+            f"n={r.stats.count} mean={_num(r.stats.mean)} m "
+            f"coverage={_num(r.stats.coverage_pct)} %",
+            ((str(k), str(v)) for k, v in r.as_dict().items()
+             if k not in ("key", "label", "group")),
+        )
+        for r in ev.rows
+    ]  # fmt: skip
+
+
+def tracks_status(name: str, ms: MultiScore) -> DiagnosticStatus:
+    """The evaluator node's multi-target score of the tracks received so far."""
+    return make_status(
+        f"{name}: tracks",
+        f"GOSPA mean {_num(ms.gospa_mean_m)} m, coverage {_num(ms.coverage_pct)} %",
+        [("vehicles", ", ".join(u.name for u in ms.uavs)),
+         ("epochs", str(ms.epochs)), ("GOSPA mean m", _num(ms.gospa_mean_m)),
+         ("coverage %", _num(ms.coverage_pct)), ("id switches", str(ms.id_switches)),
+         ("id switches, kept correspondence", str(ms.id_switches_kept)),
+         ("false-track s", _num(ms.false_track_s)),
+         ("tracks on grounded UAVs s", _num(ms.excused_track_s))]
+        + [(f"{u.name} coverage %", _num(u.coverage_pct)) for u in ms.uavs],
+    )  # fmt: skip

@@ -11,6 +11,11 @@ What the node subscribes depends on what its estimator reads
   and ``rf/fixes`` (PointCloud2: RF attempts with their quality;
   :mod:`uav_fusion.core.data.clouds`).
 
+With an arrival log (:class:`ArrivalLog`, the node's ``arrivals_file``), every input with
+something to fuse is written down as it arrives (``source,stamp,arrival``, the format of
+:mod:`uav_fusion.core.live.schedule`), so that ``uav_fusion run --arrivals`` can fuse the same
+flight in the same order offline and reproduce what the node published.
+
 A message that cannot be decoded (NaN, bad covariance, wrong frame, zero stamp, unusable
 layout) is dropped and counted as ``<source>_<reason>``; a point of a cloud that cannot be a
 measurement is dropped and counted as ``<source>_point_<reason>`` while the message's good
@@ -20,14 +25,18 @@ rate and stamp-delay monitor (:class:`~uav_fusion.ros.diagnostics.InputMonitor`)
 
 from __future__ import annotations
 
+import csv
+import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from sensor_msgs.msg import PointCloud2
 
+from uav_fusion.core.live.schedule import HEADER
 from uav_fusion.core.records import RADAR, RF, RadarFrame, RfAttempt
 from uav_fusion.ros import conversions as cv
 from uav_fusion.ros.diagnostics import InputMonitor
@@ -43,6 +52,25 @@ class InputTopics:
     rf_fixes: str = "rf/fixes"
 
 
+class ArrivalLog:
+    """The arrival schedule of a live node, written as inputs arrive (see the module text)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = self.path.open("w", newline="", encoding="utf-8")
+        self._w = csv.writer(self._fh)
+        self._w.writerow(HEADER)
+        self.rows = 0
+
+    def add(self, source: str, stamp: float) -> None:
+        self._w.writerow((source, repr(stamp), repr(time.time())))
+        self.rows += 1
+
+    def close(self) -> None:
+        self._fh.close()
+
+
 class FusionInput:
     """Decodes the fusion node's two inputs (see the module text)."""
 
@@ -55,11 +83,13 @@ class FusionInput:
         *,
         use_message_covariance: bool = True,
         monitor: dict[str, float] | None = None,
+        arrivals: ArrivalLog | None = None,
     ) -> None:
         self.frame_id = frame_id
         self.frames = reads == "frames"
         self.warn = warn
         self.use_message_covariance = use_message_covariance
+        self.arrivals = arrivals
         self.radar_topic = topics.radar_tracks if self.frames else topics.radar_pose
         self.rf_topic = topics.rf_fixes if self.frames else topics.rf_fix
         self.radar_type: Any = PointCloud2 if self.frames else PoseWithCovarianceStamped
@@ -92,6 +122,8 @@ class FusionInput:
             self._dropped_message(RADAR, msg, now, exc)
             return None
         self.monitors[RADAR].tick(now - frame.t)
+        if self.arrivals is not None and frame.tracks:
+            self.arrivals.add(RADAR, frame.t)
         return frame
 
     def rf(self, msg: Any, now: float) -> list[RfAttempt] | None:
@@ -107,6 +139,10 @@ class FusionInput:
             self._dropped_message(RF, msg, now, exc)
             return None
         self.monitors[RF].tick(now - cv.time_from_stamp(msg.header.stamp))
+        if self.arrivals is not None:
+            for a in attempts:
+                if a.ok:
+                    self.arrivals.add(RF, a.t)
         return attempts
 
     def _dropped_message(self, source: str, msg: Any, now: float, exc: cv.MessageError) -> None:

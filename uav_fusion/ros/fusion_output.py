@@ -42,7 +42,6 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import NavSatFix
 from visualization_msgs.msg import MarkerArray
 
-from uav_fusion.core.estimators.base import Estimator
 from uav_fusion.core.estimators.grid import GridEpoch, GridState, Outputs
 from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.live.pipeline import Pipeline
@@ -95,7 +94,7 @@ class FusionOutput:
     def __init__(
         self,
         node: Node,
-        estimator: Estimator,
+        pipeline: Pipeline,
         site: Site,
         frame_id: str,
         child_frame_id: str,
@@ -104,11 +103,11 @@ class FusionOutput:
         views: ViewSettings,
     ) -> None:
         self.node = node
-        self.estimator = estimator
+        self.pipeline = pipeline
         self.site = site
         self.frame = frame_id
         self.child_frame = child_frame_id
-        self.fixed_rate = estimator.fixed_rate
+        self.fixed_rate = pipeline.estimator.fixed_rate
         # publishers need no QoS event handlers (waitables the executor would poll)
         quiet = PublisherEventCallbacks(use_default_callbacks=False)
 
@@ -192,7 +191,7 @@ class FusionOutput:
         if nis is not None and math.isfinite(nis):
             self.nis[source].append(float(nis))
         validated = step.validated
-        meas = self.estimator.measurement(step)
+        meas = self.pipeline.estimator.measurement(step)
         if meas is not None:
             z = meas[0]
             if source == RADAR:
@@ -311,7 +310,7 @@ class FusionOutput:
             vals[f"rejected_{k}"] = v
         for k, v in sorted((inp.dropped + pipe.dropped).items()):
             vals[f"dropped_{k}"] = v
-        est = self.estimator
+        est = pipe.estimator
         if est.fixed_rate:
             vals["grid_published"] = self.grid_published
         if self.track_epochs:
@@ -330,6 +329,10 @@ class FusionOutput:
         vals["steps_published"] = self.steps_published
         vals["buffer_pending"] = pipe.buffer.pending
         vals["buffer_max_depth"] = pipe.buffer.max_depth
+        rw = pipe.rewinder
+        if rw is not None:
+            vals["rewinds"] = rw.rewinds
+            vals["refiltered_inputs"] = rw.refiltered
         # matched readers per output: outputs nobody reads are not built
         for key, p in (("odom", self.pub_odom), ("updated", self.pub_updated),
                        ("coasted", self.pub_coasted), ("accepted_radar", self.pub_acc_radar),

@@ -37,8 +37,8 @@ from uav_fusion.core.analysis.labels import (
 )
 from uav_fusion.core.estimators.grid import GridEpoch
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RadarFrame, RfAttempt
 from uav_fusion.core.scoring.gospa import MultiScoreSettings, UavTruth, score_flight
 from uav_fusion.core.site import Site

@@ -23,7 +23,7 @@ from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_f
 from uav_fusion.core.bench.definition import BenchDefinition
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
-from uav_fusion.core.estimators.multi import emitter_key
+from uav_fusion.core.estimators.emitters import emitter_key
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin import radar_model

@@ -29,9 +29,9 @@ from uav_fusion.core.analysis.labels import (
     labelled_flights,
 )
 from uav_fusion.core.estimators.base import feed
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import Tracker
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import Flight, RadarFrame
 from uav_fusion.core.site import Site
 

@@ -78,13 +78,18 @@ from uav_fusion.core.bench.multi import (
     near_labels,
 )
 from uav_fusion.core.data import load_flight
-from uav_fusion.core.estimators.grid import Grid, grid_from_steps
 from uav_fusion.core.estimators.offline import run_flight
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import UPDATED
 from uav_fusion.core.estimators.tracker import TrackerStep
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RADAR
-from uav_fusion.core.scoring.fixed_rate import FlightTruth, epoch_errors, observable_epochs
+from uav_fusion.core.scoring.fixed_rate import (
+    FlightTruth,
+    Grid,
+    epoch_errors,
+    grid_from_steps,
+    observable_epochs,
+)
 from uav_fusion.core.scoring.gospa import UavTruth
 
 BoolArray = npt.NDArray[np.bool_]

@@ -68,25 +68,21 @@ from uav_fusion.core.bench.multi import (
     pool_multi,
 )
 from uav_fusion.core.bench.single import ScoreTask, score_task
-from uav_fusion.core.estimators.components import scale_packed
-from uav_fusion.core.estimators.grid import Grid, grid_from_published
+from uav_fusion.core.estimators.emitters import emitter_key
 from uav_fusion.core.estimators.kalman import PackedR
-from uav_fusion.core.estimators.multi import (
-    MultiTracker,
-    UavTrack,
-    emitter_key,
-    run_multi,
-)
-from uav_fusion.core.estimators.multi_settings import MultiSettings
+from uav_fusion.core.estimators.multi import MultiTracker, UavTrack, run_multi
 from uav_fusion.core.estimators.objects import RadarObject
-from uav_fusion.core.estimators.profile import Profile
+from uav_fusion.core.estimators.parts import object_start, scale_packed
 from uav_fusion.core.estimators.selection import frames_input
-from uav_fusion.core.estimators.tracker import object_start
+from uav_fusion.core.profiles.model import Profile
+from uav_fusion.core.profiles.settings import MultiSettings
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.scoring.fixed_rate import (
     FlightTruth,
+    Grid,
     GridSamples,
     epoch_errors,
+    grid_from_published,
     observable_epochs,
     pool,
     score_grid,
@@ -133,34 +129,23 @@ class LabelOracle(MultiTracker):
     def process_radar_frame(self, frame: RadarFrame) -> None:
         t = frame.t
         cfg = self.cfg
-        dv = self._extra_var
-        rx, ry, rz = self._radar_pos
+        front = self.front
         # per vehicle: its labelled reports (object, R, measurement, beyond the range gate)
         mine: dict[str, list[_Labelled]] = {}
-        align = self._align.point if self._align is not None else None
-        for trk in frame.tracks:
-            e, n_, u = trk.e, trk.n, trk.u
-            if not math.isfinite(trk.t + e + n_ + u):
-                continue
-            if align is not None:
-                e, n_, u = align(e, n_, u)
-            ro = self._r_obj.r_at(e, n_, u)
-            p3 = (e, n_, u)
-            obj = self.objects.update(trk, ro, p3)
+        for _, trk, obj, p3, r, d2 in front.reports(frame)[1]:
             lab = kind_at(self.kinds, trk.track_id, t)
             if lab is None or lab[0] != radar_model.UAV:
                 continue
             vehicle = self.vehicle_of_object.get(lab[1])
             if vehicle is None:
                 continue
-            r: PackedR = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
-            d2 = (e - rx) ** 2 + (n_ - ry) ** 2 + (u - rz) ** 2
-            if (d2 > self._gate2 and not d2 <= self._far2) or (
+            if (d2 > front.gate2 and not d2 <= front.far2) or (
                 cfg.skip_radar_coasts and obj.coasting
             ):
                 continue
+            e, n_, u = p3
             z: tuple[float, ...] = p3
-            far = d2 > self._gate2
+            far = d2 > front.gate2
             if far or (self.settings.flat_below_ground and u < -cfg.below_ground_m):
                 z, r = (e, n_), (r[0], r[1], r[3])
             mine.setdefault(vehicle, []).append((obj, r, z, far))
@@ -206,9 +191,9 @@ class LabelOracle(MultiTracker):
         z = (att.e, att.n)
         tr = self._track_of(vehicle)
         if tr is None:  # as the tracker: an RF start is tentative, confirmed by M of N fixes
-            self._own(vehicle, self._rf_start(t, z, r))
+            self._own(vehicle, self.emitters.start(t, z, r))
             return
-        self._rf_to(tr, t, z, r)
+        self.emitters.update(tr, t, z, r)
 
 
 # --- multi-UAV --------------------------------------------------------------------------------
@@ -383,7 +368,7 @@ def _run_single_pair(
         t1,
         profile.max_coast_s,
     )
-    align = oracle.alignment.point if oracle.alignment is not None else None
+    align = oracle.front.align.point if oracle.front.align is not None else None
     return ours, stream, grid, align
 
 

@@ -48,17 +48,17 @@ from uav_fusion.core.bench.cache import CachedFlight, read_vehicle_labels
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import Flight
 from uav_fusion.core.scoring.gospa import (
-    FlightSamples,
     MultiScoreSettings,
     UavTruth,
     pool,
     score_flight,
 )
 from uav_fusion.core.scoring.metrics import interpolate_truth
+from uav_fusion.core.scoring.outcomes import FlightSamples
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin.writers import MANIFEST
 
@@ -292,7 +292,7 @@ class MultiBenchScore:
     err_mean_m: float
     err_p95_m: float
     id_switches: int  # on GOSPA's assignment per epoch
-    id_switches_kept: int  # on the CLEAR MOT correspondence (core/scoring/gospa.py)
+    id_switches_kept: int  # on the CLEAR MOT correspondence (core/scoring/continuity.py)
     crossings: int
     crossings_over_one: int  # crossings with more than one ID switch (per-epoch assignment)
     crossings_over_one_kept: int  # ... on the kept correspondence

@@ -141,22 +141,21 @@ CSV_FIELDS = (
     "gross_rf_pct", "steps", "seconds",
 )
 
-# the per-flight Markdown table: (GridScore field, header, format)
+# the per-flight Markdown table, (GridScore field, header, format): most of the printed
+# table's columns, and where the gross errors come from
+_PRINTED = {c[0]: c for c in TABLE_COLUMNS}
+_SHARED = (
+    "coverage_pct", "fresh_coverage_pct", "err_mean_m", "err_p95_m", "err_max_m", "gross_pct",
+    "observable_coverage_pct", "observable_gross_pct",
+)  # fmt: skip
 FLIGHT_COLUMNS: tuple[tuple[str, str, str], ...] = (
-    ("coverage_pct", "cov %", ".1f"),
-    ("fresh_coverage_pct", "fresh %", ".1f"),
-    ("err_mean_m", "mean m", ".1f"),
-    ("err_p95_m", "p95 m", ".1f"),
-    ("err_max_m", "max m", ".0f"),
-    ("gross_pct", "gross %", ".1f"),
-    ("observable_coverage_pct", "obs cov %", ".1f"),
-    ("observable_gross_pct", "obs gross %", ".1f"),
+    *(_PRINTED[f] for f in _SHARED),
     ("observable_after_start_pct", "obs cov after 1st track %", ".1f"),
-    ("anees", "ANEES", ".1f"),
+    _PRINTED["anees"],
     ("gross_vertical_pct", "gross: vertical %", ".0f"),
     ("gross_age_p50_s", "gross: age p50 s", ".1f"),
     ("gross_rf_pct", "gross: last RF %", ".0f"),
-    ("restarts", "restarts", "d"),
+    _PRINTED["restarts"],
 )
 
 

@@ -13,10 +13,15 @@ from uav_fusion.core.bench.cache import CachedFlight, generate_flight, read_labe
 from uav_fusion.core.bench.definition import BenchDefinition
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
-from uav_fusion.core.estimators.grid import grid_from_steps
 from uav_fusion.core.estimators.offline import run_flight
-from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.scoring.fixed_rate import FlightTruth, GridSamples, ScoreSettings, score_grid
+from uav_fusion.core.profiles.model import Profile
+from uav_fusion.core.scoring.fixed_rate import (
+    FlightTruth,
+    GridSamples,
+    ScoreSettings,
+    grid_from_steps,
+    score_grid,
+)
 from uav_fusion.core.site import Site
 
 

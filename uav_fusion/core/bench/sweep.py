@@ -63,14 +63,14 @@ from uav_fusion.core.bench.multi import (
 )
 from uav_fusion.core.bench.single import ScoreTask, score_task
 from uav_fusion.core.errors import ConfigError, UavFusionError
-from uav_fusion.core.estimators.keys import BOOL, CHOICE, INTEGER, NUMBER, Q3, check, convert
-from uav_fusion.core.estimators.profile import (
+from uav_fusion.core.profiles.checks import BOOL, CHOICE, INTEGER, NUMBER, Q3, check, convert
+from uav_fusion.core.profiles.model import (
     Profile,
     load_profile,
     profile_files,
     profile_path,
 )
-from uav_fusion.core.estimators.schema import belongs, find
+from uav_fusion.core.profiles.schema import belongs, find
 from uav_fusion.core.scoring.fixed_rate import GridScore, ScoreSettings, pool
 from uav_fusion.core.site import Site
 from uav_fusion.core.yamlio import read_yaml_file

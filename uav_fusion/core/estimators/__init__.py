@@ -28,7 +28,6 @@ from uav_fusion.core.estimators.offline import (
     smooth_steps,
 )
 from uav_fusion.core.estimators.paper import FusionEstimator
-from uav_fusion.core.estimators.profile import Profile, load_profile, profile_from_dict
 from uav_fusion.core.estimators.selection import (
     StreamInfo,
     build_stream,
@@ -38,6 +37,7 @@ from uav_fusion.core.estimators.selection import (
 )
 from uav_fusion.core.estimators.steps import STATUSES, Step
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep, TrackEstimate
+from uav_fusion.core.profiles.model import Profile, load_profile, profile_from_dict
 
 __all__ = [
     "ESTIMATORS",

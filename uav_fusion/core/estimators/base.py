@@ -29,8 +29,8 @@ import numpy.typing as npt
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators.grid import Outputs
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import Step
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site
 

@@ -30,12 +30,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimators.kalman import CvKalman
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.steps import (
     COASTED,
     DISCARDED,
@@ -45,6 +45,7 @@ from uav_fusion.core.estimators.steps import (
     USED,
     Step,
 )
+from uav_fusion.core.profiles.model import Profile
 
 FloatArray = npt.NDArray[np.float64]
 Predict = Callable[[FloatArray, FloatArray, float], tuple[FloatArray, FloatArray]]
@@ -405,147 +406,51 @@ def step_outputs(grid: StepGrid | None, steps: list[Step]) -> Outputs:
     return out
 
 
-@dataclass(frozen=True)
-class Grid:
-    """A run's fixed-rate output as arrays (one row per epoch)."""
+class TrackSource(Protocol):
+    """What :class:`MultiGrid` reads: every track a multi-UAV estimator publishes at a time."""
 
-    frequency_hz: float
-    max_coast_s: float | None
-    t: FloatArray  # (N,)
-    x: FloatArray  # (N, 6)
-    P: FloatArray  # (N, 6, 6)
-    has_track: npt.NDArray[np.bool_]
-    published: npt.NDArray[np.bool_]
-    age_s: FloatArray
-    track_id: npt.NDArray[np.int64]
-    last_source: npt.NDArray[np.str_]  # source of the last accepted measurement ("" none)
-    confirmed_tracks: int  # confirmed tracks over the whole run (not only inside the grid)
-
-    @property
-    def restarts(self) -> int:
-        return max(0, self.confirmed_tracks - 1)
-
-    def __len__(self) -> int:
-        return int(self.t.size)
-
-    def write_csv(self, path: str) -> None:
-        """One row per epoch: time, published, has_track, track id, age, state, P diagonal."""
-        import csv
-
-        with open(path, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(GRID_CSV_HEADER)
-            for i in range(len(self)):
-                d = np.diag(self.P[i])
-                w.writerow(
-                    [
-                        f"{self.t[i]:.6f}",
-                        int(self.published[i]),
-                        int(self.has_track[i]),
-                        int(self.track_id[i]),
-                        "" if not math.isfinite(self.age_s[i]) else f"{self.age_s[i]:.6f}",
-                        str(self.last_source[i]),
-                    ]
-                    + ["" if not math.isfinite(v) else f"{v:.6f}" for v in self.x[i]]
-                    + ["" if not math.isfinite(v) else f"{v:.6g}" for v in d]
-                )
+    def outputs(self, t: float | None = None) -> list[TrackOutput]: ...
 
 
-GRID_CSV_HEADER = (
-    *("t", "published", "has_track", "track", "age_s", "last_source"),
-    *("x", "y", "z", "vx", "vy", "vz"),
-    *("var_x", "var_y", "var_z", "var_vx", "var_vy", "var_vz"),
-)
+class MultiGrid(EpochClock):
+    """The confirmed tracks at every grid epoch ``k / frequency_hz``, emitted as processed time
+    passes it (the same for a live node and an offline run): call :meth:`before` with an
+    item's time before feeding the item to the tracker, :meth:`advance` when everything up to
+    a time has been processed. Each track the tracker publishes (its ``outputs``;
+    :meth:`~uav_fusion.core.estimators.multi.MultiTracker.outputs`)
+    is predicted to the epoch, while its last accepted measurement is at most ``max_coast_s``
+    old. No epoch before ``t0`` (default: the first time seen) or after
+    ``t1``."""
 
+    def __init__(
+        self,
+        tracker: TrackSource,
+        frequency_hz: float,
+        t0: float | None = None,
+        t1: float | None = None,
+        max_coast_s: float | None = None,
+    ) -> None:
+        super().__init__(frequency_hz, t0, t1)
+        self.tracker = tracker
+        self.max_coast_s = max_coast_s
 
-def stack_states(
-    states: Sequence[GridState],
-    frequency_hz: float,
-    max_coast_s: float | None,
-    confirmed_tracks: int,
-) -> Grid:
-    n = len(states)
-    return Grid(
-        frequency_hz=frequency_hz,
-        max_coast_s=max_coast_s,
-        t=np.array([s.t for s in states], dtype=float),
-        x=np.array([s.x for s in states], dtype=float).reshape(n, 6),
-        P=np.array([s.P for s in states], dtype=float).reshape(n, 6, 6),
-        has_track=np.array([s.has_track for s in states], dtype=bool),
-        published=np.array([s.published for s in states], dtype=bool),
-        age_s=np.array([s.age_s for s in states], dtype=float),
-        track_id=np.array([s.track_id for s in states], dtype=np.int64),
-        last_source=np.array([s.last_source for s in states], dtype=str).reshape(n),
-        confirmed_tracks=confirmed_tracks,
-    )
+    def _epochs(self, ks: list[int]) -> list[GridEpoch]:
+        out: list[GridEpoch] = []
+        mc = self.max_coast_s
+        for k in ks:
+            g = self.epoch_time(k)
+            tracks = tuple(
+                o
+                for o in self.tracker.outputs(g)
+                if o.t <= g and (mc is None or g - o.last_update_t <= mc)
+            )
+            out.append(GridEpoch(g, tracks))
+        return out
 
+    def before(self, t: float) -> list[GridEpoch]:
+        """An item at ``t`` is about to be processed: every epoch before ``t``."""
+        return self._epochs(self.take(t, inclusive=False))
 
-def grid_from_steps(
-    steps: Iterable[Step],
-    profile: Profile,
-    frequency_hz: float,
-    t0: float,
-    t1: float,
-    predict: Predict | None = None,
-) -> Grid:
-    """The fixed-rate output of a run (its steps, in processing order) on ``[t0, t1]``.
-
-    Uses ``profile``'s maximum coast and motion model (``predict`` overrides the latter).
-    """
-    sg = StepGrid(profile, frequency_hz, t0, t1, predict)
-    states = sg.feed_steps(steps)
-    states.extend(sg.emitter.finish())
-    return stack_states(states, frequency_hz, profile.max_coast_s, sg.confirmed_tracks)
-
-
-def on_grid(t: float, frequency_hz: float, tol: float = 1.0e-6) -> bool:
-    """Is ``t`` (seconds) an epoch ``k / frequency_hz`` (within ``tol`` of an epoch step)?"""
-    k = round(t * frequency_hz)
-    return abs(t * frequency_hz - k) <= tol
-
-
-def grid_from_published(
-    times: Sequence[float],
-    xs: Sequence[Sequence[float]],
-    Ps: Sequence[FloatArray],
-    frequency_hz: float,
-    t0: float,
-    t1: float,
-    max_coast_s: float | None = None,
-) -> Grid:
-    """The fixed-rate output as a subscriber sees it: every epoch ``k / frequency`` in
-    ``[t0, t1]``, with the published states received (``times``, ``xs``, ``Ps``) and nothing
-    at the others. What a message cannot carry is unknown: ages NaN, sources "", one track."""
-    if not (math.isfinite(frequency_hz) and frequency_hz > 0):
-        raise ValueError(f"frequency_hz must be finite and > 0, got {frequency_hz}")
-    em = GridEmitter(frequency_hz, None, lambda x, P, dt: (x, P))
-    k0 = em.first_epoch(t0)
-    k1 = math.floor(t1 * frequency_hz)
-    while em.epoch_time(k1 + 1) <= t1:
-        k1 += 1
-    while k1 >= k0 and em.epoch_time(k1) > t1:
-        k1 -= 1
-    n = max(0, k1 - k0 + 1)
-    t = np.array([em.epoch_time(k) for k in range(k0, k0 + n)], dtype=float)
-    x = np.full((n, 6), math.nan)
-    P = np.full((n, 6, 6), math.nan)
-    pub = np.zeros(n, dtype=bool)
-    for ti, xi, Pi in zip(times, xs, Ps, strict=True):
-        i = round(ti * frequency_hz) - k0
-        if 0 <= i < n:
-            x[i] = np.asarray(xi, dtype=float)
-            P[i] = np.asarray(Pi, dtype=float)
-            pub[i] = True
-    return Grid(
-        frequency_hz=float(frequency_hz),
-        max_coast_s=max_coast_s,
-        t=t,
-        x=x,
-        P=P,
-        has_track=pub.copy(),
-        published=pub,
-        age_s=np.full(n, math.nan),
-        track_id=np.where(pub, 0, -1).astype(np.int64),
-        last_source=np.full(n, "", dtype=str),
-        confirmed_tracks=1 if pub.any() else 0,
-    )
+    def advance(self, t: float) -> list[GridEpoch]:
+        """Everything up to ``t`` has been processed: every epoch up to ``t``."""
+        return self._epochs(self.take(t, inclusive=True))

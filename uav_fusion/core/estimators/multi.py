@@ -1,65 +1,42 @@
 """Several UAVs at once: every confirmed UAV track with a stable id and a UAV probability.
 
-Built from the single-UAV tracker's parts (:mod:`~uav_fusion.core.estimators.tracker`): the
-profile's motion filter, measurement models, robust weight, NIS gate, deleter and M-of-N
-confirmation, and the radar object table with its UAV score
-(:mod:`~uav_fusion.core.estimators.objects`), which already follows every radar object.
-The score reads a young radar track's class for its age as the single-UAV tracker does (the
-profile's ``association.class.prior_logit``; ``MultiSettings.class_by_age`` False reads each
-report's class as it is; docs/estimator.md, "A young radar track's class"), and, while the
-radar track is young, for its range too (``class_range_scale_m``, ``class_range_age_s``).
-Its own settings (:class:`~uav_fusion.core.estimators.multi_settings.MultiSettings`) are the
-profile's ``multi`` section (``config/profiles/README.md``, "Multi-UAV keys"); a ``settings``
-argument given to :class:`MultiTracker` replaces them.
+It composes the parts it shares with the single-UAV tracker
+(:mod:`~uav_fusion.core.estimators.parts`: the radar front-end with the radar object table and
+its UAV score, the measurement models, the robust weight, the NIS gates, the deleter and M-of-N
+confirmation) and routes RF fixes by emitter (:mod:`~uav_fusion.core.estimators.emitters`).
+The score reads a young radar track's class for its age, and, while the radar track is young,
+for its range too (``class_range_scale_m``, ``class_range_age_s``). Its own settings are the
+profile's ``multi`` section (``config/profiles/README.md``); a ``settings`` argument given to
+:class:`MultiTracker` replaces them.
 
 Per radar frame (one time for all reports):
 
-1. every finite report updates its radar object; reports beyond the range gate (or, with
-   ``far_gate_m``, beyond the far gate), coasted reports (with
-   ``association.object.skip_radar_coasts``) and reports of objects scoring below ``follow_min``
-   are not candidates, except for one track: an object scoring at least
-   ``emitter_follow_min`` whose last RF credit came from an emitter (its
-   :attr:`~uav_fusion.core.estimators.objects.RadarObject.rf_key`, still supported) may
-   update the track carrying that emitter (a young radar track on an emitting UAV, its class
-   not yet built up, where the emitter's own fix put it); a candidate between the range gate
-   and the far gate, or below the ground (``flat_below_ground``), is horizontal only: it may
-   update a track (its climb rate held near zero first); one below the ground never starts a
-   track, one beyond the range gate may (step 4), with the RF start's height prior
-   (``rf_init_altitude_m``, ``rf_init_altitude_std_m``) and no climb;
+1. every finite report updates its radar object; the candidates are the reports inside the
+   range gate (horizontal only between it and the far gate, or below the ground with
+   ``flat_below_ground``), not coasting, of objects scoring at least ``follow_min`` (or at
+   least ``emitter_follow_min`` for the track carrying the emitter whose fix last credited
+   the object: a young radar track on an emitting UAV);
 2. every track is predicted to the frame's time (the deleter drops a track whose last
    accepted measurement is older than ``max_coast_s``);
-3. tracks and candidates are assigned one to one (global nearest neighbour: Hungarian
-   assignment on the position NIS plus ``velocity_weight`` times the NIS of the velocity the
-   radar reports for its track against the track's velocity (two UAVs crossing are close
-   in position but not in velocity), less ``continuity_bonus`` for the radar object the
-   track took last (0 by default: the radar's own tracker swaps ids at crossings);
-   pairs outside the NIS gate forbidden. Unlike the single-UAV tracker the UAV score is not
-   in the cost: it tells a UAV from clutter, not one UAV from another); an assigned report
-   updates its track (robust weight); a confirmed track whose own radar object reported
-   outside its gate counts a rejection (``max_consecutive_rejections`` drop it);
+3. tracks and candidates are assigned one to one (Hungarian assignment on the position NIS
+   plus ``velocity_weight`` times the NIS of the radar's reported velocity against the
+   track's, less ``continuity_bonus`` for the radar object the track took last; pairs
+   outside the NIS gate forbidden; the UAV score is not in the cost: it tells a UAV from
+   clutter, not one UAV from another); an assigned report updates its track (robust
+   weight); a confirmed track whose own radar object reported outside its gate counts a
+   rejection;
 4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
-   ``init_min_reports`` reports), has been seen for ``birth_age_s`` (default: the score's
-   ``stationary_min_age_s``, so that the stationary-clutter cue has had its chance), or for
-   ``early_birth_age_s`` while its mean speed is at least ``early_birth_speed_mps`` (it is
-   not standing still, so that cue has nothing to say), or has RF support, and lies outside
-   the gate of every track starts a new confirmed track from its object's state (a report
-   beyond the range gate, or under the ground and so used on east / north only, starts it
-   at the RF start's height prior; one under the ground whose object is a ghost, its mean
-   height clearly below the ground, starts none);
+   ``init_min_reports`` reports), old enough (``birth_age_s``, or ``early_birth_age_s`` while
+   it moves at ``early_birth_speed_mps``, or with RF support) and outside every track's gate
+   starts a confirmed track from its object's state (at the RF start's height prior when it
+   has no usable height; never from a ghost below the ground);
 5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
    for ``merge_s`` are one UAV, unless both were updated within ``merge_s`` by different
    radar objects (two UAVs passing each other): the younger is dropped.
 
-An RF fix (``ok`` attempts) first credits the radar objects it agrees with. It belongs to its
-emitter, keyed by centre frequency: a track that has an emitter takes only that emitter's
-fixes (inside its gate: update; outside: a rejection, and after ``emitter_misses`` such
-fixes in a row the track loses the emitter: the link was wrong, e.g. made from a fix of a UAV
-still on its pad, and the emitter's next fix links anew); a fix of an emitter no track has yet
-goes to the nearest track without an emitter whose gate it falls in, which then carries that
-emitter; otherwise it starts a tentative track of that emitter, confirmed by M of N fixes as
-in the single-UAV tracker. A fix without a frequency is one emitter of its own ("unknown").
+RF fixes go to the track of their emitter (:mod:`~uav_fusion.core.estimators.emitters`).
 
-The output (:meth:`MultiTracker.outputs`, and so :class:`MultiGrid`) holds a confirmed track
+The output (:meth:`MultiTracker.outputs`, and so its fixed-rate epochs) holds a confirmed track
 while its last accepted measurement is at most ``output_coast_s`` old and, inside the radar's
 range gate, its last radar update at most ``radar_output_s`` old (3 s each; the track itself
 lives until the profile's ``max_coast_s``, so a UAV found again keeps its id): a track whose
@@ -82,48 +59,37 @@ import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
 from uav_fusion.core.estimators.base import drive
-from uav_fusion.core.estimators.components import (
-    Deleter,
-    MofN,
-    PolarRadarR,
-    RadarAlignment,
-    scale_packed,
+from uav_fusion.core.estimators.emitters import Emitters
+from uav_fusion.core.estimators.grid import GridEpoch, GridState, MultiGrid, Outputs, TrackOutput
+from uav_fusion.core.estimators.kalman import (
+    MotionFilter,
+    PackedR,
+    expand_upper,
+    merge_nis,
+    velocity_nis,
 )
-from uav_fusion.core.estimators.filters import MotionFilter
-from uav_fusion.core.estimators.grid import EpochClock, GridEpoch, GridState, Outputs, TrackOutput
-from uav_fusion.core.estimators.kalman import PackedR, expand_upper
-from uav_fusion.core.estimators.multi_settings import MultiSettings
-from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
-from uav_fusion.core.estimators.profile import Profile
-from uav_fusion.core.estimators.selection import frames_input
-from uav_fusion.core.estimators.steps import Step, nis_gate
-from uav_fusion.core.estimators.tracker import (
-    alignment_from_profile,
+from uav_fusion.core.estimators.objects import RadarObject
+from uav_fusion.core.estimators.parts import (
+    MofN,
+    RadarFront,
+    TrackParts,
     motion_filter_from_profile,
     object_start,
-    radar_gates2,
-    radar_model_from_profile,
-    rf_model_from_profile,
-    robust_from_profile,
+    scale_packed,
 )
+from uav_fusion.core.estimators.selection import frames_input
+from uav_fusion.core.estimators.steps import Step
+from uav_fusion.core.profiles.model import Profile
+from uav_fusion.core.profiles.settings import MultiSettings
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Emitter key of RF fixes without a centre frequency.
-UNKNOWN_EMITTER = "unknown"
 _FORBIDDEN = 1.0e9
 # a radar report that may update a track: the report, its object, the object's UAV score, R
 # and the measurement (e, n, u; or e, n for a report below the ground: ``flat_below_ground``)
 _Cand = tuple[RadarTrack, RadarObject, float, PackedR, tuple[float, ...]]
-
-
-def emitter_key(freq_hz: float | None) -> str:
-    """The emitter a fix belongs to: its centre frequency in whole kHz, or ``unknown``."""
-    if freq_hz is None or not math.isfinite(freq_hz):
-        return UNKNOWN_EMITTER
-    return f"{round(freq_hz / 1e3):d}kHz"
 
 
 class UavTrack:
@@ -194,28 +160,21 @@ class MultiTracker:
                 class_range_scale_m=st.class_range_scale_m,
                 class_range_age_s=st.class_range_age_s,
             )
-        self.radar_r = radar_model_from_profile(profile, site)
-        self._align = alignment_from_profile(profile, site)
-        self.rf_r = rf_model_from_profile(profile)
-        self.robust = robust_from_profile(profile)
-        r_obj = self.radar_r
-        self._extra_var = 0.0
-        if isinstance(r_obj, PolarRadarR):
-            f_obj = min(r_obj.floor_m, self.cfg.object_floor_m)
-            self._extra_var = r_obj.floor_m**2 - f_obj**2
-            r_obj = replace(r_obj, floor_m=f_obj)
-        self._r_obj = r_obj
-        self.objects = ObjectTable(self.cfg, r_obj)
-        self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
-        self._g2 = nis_gate(profile.nis_probability, 2)
-        self._g3 = nis_gate(profile.nis_probability, 3)
-        self._gate2, self._far2 = radar_gates2(profile, site)  # far: 0 without a far gate
-        self._radar_pos = tuple(float(v) for v in site.radar.enu)
+        self.front = RadarFront(profile, site, self.cfg)
+        self.objects = self.front.objects
+        self.radar_r = self.front.radar_r
+        parts = TrackParts(profile)
+        self.rf_r = parts.rf_r
+        self.robust = parts.robust
+        self.deleter = parts.deleter
+        self._g2 = parts.g2
+        self._g3 = parts.g3
+        self.emitters = Emitters(self)
         self.tracks: list[UavTrack] = []
         self._next_id = 1
         self.counters: dict[str, int] = {}
         self._args = (settings, grid_hz, t0, t1)
-        self.grid = MultiGrid(self, grid_hz, t0, t1)
+        self.grid = MultiGrid(self, grid_hz, t0, t1, profile.max_coast_s)
 
     # --- the estimator interface (uav_fusion.core.estimators.base) ----------------------
     def radar_frame(self, frame: RadarFrame) -> Outputs:
@@ -267,12 +226,6 @@ class MultiTracker:
         ]  # fmt: skip
         return Outputs(grid=grid, tracks=epochs)
 
-    @property
-    def alignment(self) -> RadarAlignment | None:
-        """The radar's misalignment correction applied to every report before use (None:
-        the profile has none)."""
-        return self._align
-
     # --- output ---------------------------------------------------------------------------
     def _count(self, key: str, n: int = 1) -> None:
         self.counters[key] = self.counters.get(key, 0) + n
@@ -320,9 +273,9 @@ class MultiTracker:
             return True
         if tr.last_radar_t is not None and t - tr.last_radar_t <= st.radar_output_s:
             return True
-        rx, ry, rz = self._radar_pos
+        rx, ry, rz = self.front.radar_pos
         d2 = (x[0] - rx) ** 2 + (x[1] - ry) ** 2 + (x[2] - rz) ** 2
-        return d2 > self._gate2
+        return d2 > self.front.gate2
 
     # --- track life ------------------------------------------------------------------------
     def _new_track(self, t: float, x: list[float], P: FloatArray, confirmed: bool) -> UavTrack:
@@ -364,38 +317,58 @@ class MultiTracker:
     # --- radar ------------------------------------------------------------------------------
     def process_radar_frame(self, frame: RadarFrame) -> None:
         t = frame.t
+        cands, far_cands, weak = self._candidates(frame)
+        self._advance(t)
+        take_tentative = self.settings.tentative_takes_radar
+        live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
+        g2 = self._g2
+        g3 = self._g3
+        nis_rows: list[list[float]] = []
+        for tr in live:
+            f = tr.filter
+            row = []
+            for c in cands:
+                n = f.nis(c[4], c[3])
+                row.append(n if len(c[4]) == 3 else n * g3 / g2)  # 2D on the 3D gate's scale
+            nis_rows.append(row)
+        took: dict[int, int] = {}  # live track index -> the candidate it took
+        if live and cands:
+            took = self._assign(t, live, cands, weak, nis_rows)
+        # a confirmed track whose own object reported outside its gate: a rejection
+        for a, tr in enumerate(live):
+            if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
+                continue
+            for b, c in enumerate(cands):
+                if c[0].track_id == tr.followed and nis_rows[a][b] > g3:
+                    self._reject(tr)
+                    break
+        self._births(t, cands, far_cands, set(took.values()), took, nis_rows)
+        self._merge(t)
+
+    def _candidates(self, frame: RadarFrame) -> tuple[list[_Cand], set[int], set[int]]:
+        """The frame's reports that may update a track (every report updates its radar
+        object first), the indices of those beyond the range gate (horizontal only), and of
+        the weak ones (for the track of their object's emitter only)."""
+        t = frame.t
         cfg = self.cfg
-        dv = self._extra_var
-        rx, ry, rz = self._radar_pos
         cands: list[_Cand] = []
-        far_cands: set[int] = set()  # candidates beyond the range gate (horizontal only)
-        weak: set[int] = set()  # candidates for the track of their object's emitter only
+        far_cands: set[int] = set()
+        weak: set[int] = set()
         efm = self.settings.emitter_follow_min
         flat = self.settings.flat_below_ground
         if frame.tracks:
             self._count("radar_reports", len(frame.tracks))
-        r_at = self._r_obj.r_at
-        update_object = self.objects.update
-        gate2 = self._gate2
-        far2 = self._far2
+        bad, reports = self.front.reports(frame)
+        if bad:
+            self._count("rejected_invalid", len(bad))
+        gate2 = self.front.gate2
+        far2 = self.front.far2
         skip_coasts = cfg.skip_radar_coasts
-        isfinite = math.isfinite
-        align = self._align.point if self._align is not None else None
-        for trk in frame.tracks:
-            e, n_, u = trk.e, trk.n, trk.u
-            if not isfinite(trk.t + e + n_ + u):
-                self._count("rejected_invalid")
-                continue
-            if align is not None:  # the radar's misalignment
-                e, n_, u = align(e, n_, u)
-            ro = r_at(e, n_, u)
-            p3 = (e, n_, u)
-            obj = update_object(trk, ro, p3)
-            z: tuple[float, ...] = p3
-            r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
-            d2 = (e - rx) ** 2 + (n_ - ry) ** 2 + (u - rz) ** 2
+        for _, trk, obj, p3, r, d2 in reports:
             if (d2 > gate2 and not d2 <= far2) or (skip_coasts and obj.coasting):
                 continue
+            e, n_, u = p3
+            z: tuple[float, ...] = p3
             s = obj.score(cfg)
             if d2 > gate2:
                 # inside the far gate: horizontal only
@@ -420,76 +393,81 @@ class MultiTracker:
             if d2 > gate2:
                 far_cands.add(len(cands))
             cands.append((trk, obj, s, r, z))
-        self._advance(t)
-        take_tentative = self.settings.tentative_takes_radar
-        live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
+        return cands, far_cands, weak
+
+    def _assign(
+        self,
+        t: float,
+        live: list[UavTrack],
+        cands: list[_Cand],
+        weak: set[int],
+        nis_rows: list[list[float]],
+    ) -> dict[int, int]:
+        """Tracks and candidates one to one (Hungarian assignment); every assigned report
+        updates its track. Returns live track index -> the candidate it took."""
         g2 = self._g2
         g3 = self._g3
-        nis_rows: list[list[float]] = []
-        for tr in live:
-            f = tr.filter
-            row = []
-            for c in cands:
-                n = f.nis(c[4], c[3])
-                row.append(n if len(c[4]) == 3 else n * g3 / g2)  # 2D on the 3D gate's scale
-            nis_rows.append(row)
-        taken: set[int] = set()
-        took: dict[int, int] = {}  # live track index -> the candidate it took
-        if live and cands:
-            # NIS, less a bonus for the object the track followed last; the UAV score only
-            # decides who may update a track (follow_min): between two UAVs it says nothing
-            st = self.settings
-            bonus = st.continuity_bonus
-            wv = st.velocity_weight
-            s2 = st.velocity_sigma_mps**2
-            cost_rows: list[list[float]] = []
-            any_inside = False
-            for tr, row in zip(live, nis_rows, strict=True):
-                x, pk = tr.filter.mean() if wv > 0.0 else ([], [])
-                crow = []
-                for bi, (c, n) in enumerate(zip(cands, row, strict=True)):
-                    if not n <= g3 or (bi in weak and (c[1].rf_key != tr.emitter)):
-                        crow.append(_FORBIDDEN)
-                        continue
-                    any_inside = True
-                    v = n - bonus * (c[0].track_id == tr.followed)
-                    if wv > 0.0:
-                        v += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
-                    crow.append(v)
-                cost_rows.append(crow)
-            if any_inside:
-                cost = np.array(cost_rows)
-                rows, cols = linear_sum_assignment(cost)
-                for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
-                    if cost_rows[a][b] >= _FORBIDDEN:
-                        continue
-                    tr = live[a]
-                    trk, obj, s, r, z = cands[b]
-                    dof = len(z)
-                    n = nis_rows[a][b] if dof == 3 else nis_rows[a][b] * g2 / g3
-                    w = self.robust.weight(n, dof)
-                    if dof == 2:
-                        self._hold_height(tr)
-                    tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
-                    self._accept(tr, t)
-                    if not tr.confirmed:
-                        tr.confirmed = True
-                        tr.mofn = None
-                        self._count("confirmed")
-                    tr.followed = trk.track_id
-                    tr.last_radar_t = t
-                    tr.score = s
-                    taken.add(b)
-                    took[a] = b
-        # a confirmed track whose own object reported outside its gate: a rejection
-        for a, tr in enumerate(live):
-            if tr.followed is None or tr.last_update_t == t or tr not in self.tracks:
+        took: dict[int, int] = {}
+        # NIS, less a bonus for the object the track followed last; the UAV score only
+        # decides who may update a track (follow_min): between two UAVs it says nothing
+        st = self.settings
+        bonus = st.continuity_bonus
+        wv = st.velocity_weight
+        s2 = st.velocity_sigma_mps**2
+        cost_rows: list[list[float]] = []
+        any_inside = False
+        for tr, row in zip(live, nis_rows, strict=True):
+            x, pk = tr.filter.mean() if wv > 0.0 else ([], [])
+            crow = []
+            for bi, (c, n) in enumerate(zip(cands, row, strict=True)):
+                if not n <= g3 or (bi in weak and (c[1].rf_key != tr.emitter)):
+                    crow.append(_FORBIDDEN)
+                    continue
+                any_inside = True
+                v = n - bonus * (c[0].track_id == tr.followed)
+                if wv > 0.0:
+                    v += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
+                crow.append(v)
+            cost_rows.append(crow)
+        if not any_inside:
+            return took
+        cost = np.array(cost_rows)
+        rows, cols = linear_sum_assignment(cost)
+        for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
+            if cost_rows[a][b] >= _FORBIDDEN:
                 continue
-            for b, c in enumerate(cands):
-                if c[0].track_id == tr.followed and nis_rows[a][b] > g3:
-                    self._reject(tr)
-                    break
-        # strong objects that no track explains start tracks
+            tr = live[a]
+            trk, _obj, s, r, z = cands[b]
+            dof = len(z)
+            n = nis_rows[a][b] if dof == 3 else nis_rows[a][b] * g2 / g3
+            w = self.robust.weight(n, dof)
+            if dof == 2:
+                self._hold_height(tr)
+            tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
+            self._accept(tr, t)
+            if not tr.confirmed:
+                tr.confirmed = True
+                tr.mofn = None
+                self._count("confirmed")
+            tr.followed = trk.track_id
+            tr.last_radar_t = t
+            tr.score = s
+            took[a] = b
+        return took
+
+    def _births(
+        self,
+        t: float,
+        cands: list[_Cand],
+        far_cands: set[int],
+        taken: set[int],
+        took: dict[int, int],
+        nis_rows: list[list[float]],
+    ) -> None:
+        """Strong objects that no track explains start tracks."""
+        cfg = self.cfg
+        g3 = self._g3
+        n_live = len(nis_rows)
         for b, (trk, obj, s, _r, z) in enumerate(cands):
             if b in taken or s < cfg.init_min or obj.n_reports < cfg.init_min_reports:
                 continue
@@ -501,7 +479,7 @@ class MultiTracker:
                 continue
             if any(
                 nis_rows[a][b] <= g3 and not self._apart(a, b, took, cands)
-                for a in range(len(live))
+                for a in range(n_live)
             ):
                 continue
             x0, P0 = object_start(obj, self.profile, flat_start)
@@ -509,7 +487,6 @@ class MultiTracker:
             tr.followed = trk.track_id
             tr.last_radar_t = t
             tr.score = s
-        self._merge(t)
 
     def _old_enough(self, obj: RadarObject, t: float) -> bool:
         """Whether a strong object has been seen long enough to start a track: for
@@ -562,7 +539,7 @@ class MultiTracker:
                     continue
                 xb, pb = means[j]
                 # a track without a recent radar update has no altitude worth comparing
-                m = _merge_nis(xa, pa, xb, pb, 3 if recent[i] and recent[j] else 2)
+                m = merge_nis(xa, pa, xb, pb, 3 if recent[i] and recent[j] else 2)
                 if m is None:
                     continue
                 if m > st.merge_nis:
@@ -600,140 +577,10 @@ class MultiTracker:
         return tr.last_radar_t is not None and t - tr.last_radar_t <= self.settings.merge_s
 
     # --- RF -----------------------------------------------------------------------------------
+
     def process_rf(self, att: RfAttempt) -> None:
-        if not att.ok or not math.isfinite(att.t + att.e + att.n):
-            return
-        t = att.t
-        self._count("rf_fixes")
-        max_cep = self.profile.rf_max_cep_m
-        if max_cep is not None and att.cep is not None and att.cep > max_cep:
-            self._count("rejected_cep")
-            return
-        r = self.rf_r.r_for(att.cep, att.valid_sensors)
-        z = (att.e, att.n)
-        em = emitter_key(att.center_freq_hz)
-        self.objects.rf_fix(t, att.e, att.n, 0.5 * (r[0] + r[2]), em)
-        self._advance(t)
-        own = [tr for tr in self.tracks if tr.emitter == em and tr.t <= t]
-        tentative_only = not self.settings.tentative_takes_radar and all(
-            not tr.confirmed for tr in own
-        )
-        if own and not tentative_only:
-            tr = min(own, key=lambda x: (not x.confirmed, x.id))
-            self._rf_to(tr, t, z, r)
-            return
-        free = [
-            (tr.filter.nis(z, r), tr.id, tr)
-            for tr in self.tracks
-            if tr.emitter is None and tr.confirmed and tr.t <= t
-        ]
-        free = [e for e in free if e[0] <= self._g2]
-        if free:
-            _, _, tr = min(free, key=lambda e: (e[0], e[1]))
-            tr.emitter = em
-            tr.emitter_misses = 0
-            self._count("emitter_linked")
-            for o in own:  # the emitter's tentative track: the confirmed track took over
-                self._drop(o, "emitter_linked")
-            self._rf_to(tr, t, z, r)
-            return
-        if own:
-            self._rf_to(min(own, key=lambda x: x.id), t, z, r)
-            return
-        tr = self._rf_start(t, z, r)
-        tr.emitter = em
-
-    def _rf_start(self, t: float, z: tuple[float, float], r: PackedR) -> UavTrack:
-        """A new track from an RF fix: at the fix, with the RF start's height prior, at rest
-        (the profile's velocity sigma); tentative (M of N) when the profile asks for it."""
-        p = self.profile
-        P = np.zeros((6, 6))
-        P[0, 0], P[0, 1], P[1, 0], P[1, 1] = r[0], r[1], r[1], r[2]
-        P[2, 2] = p.rf_init_altitude_std_m**2
-        P[3, 3] = P[4, 4] = P[5, 5] = p.init_velocity_std_mps**2
-        tentative = p.confirm_m > 1
-        tr = self._new_track(t, [z[0], z[1], p.rf_init_altitude_m, 0.0, 0.0, 0.0], P, not tentative)
-        if tentative:
-            tr.mofn = MofN(p.confirm_m, p.confirm_n)
-        return tr
-
-    def _rf_to(self, tr: UavTrack, t: float, z: tuple[float, float], r: PackedR) -> None:
-        f = tr.filter
-        hold = self.profile.vz_hold_after_s
-        if hold is not None and (tr.last_radar_t is None or t - tr.last_radar_t > hold):
-            # no 3D measurement for a while: hold the climb rate near 0 (as the single-UAV
-            # tracker does) instead of letting a stale one run away
-            sd = self.profile.vz_hold_sigma_mps
-            f.update_scalar(5, 0.0, sd * sd)
-        n = f.nis(z, r)
-        hit = n <= self._g2
-        if hit:
-            w = self.robust.weight(n, 2)
-            f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
-            self._accept(tr, t)
-        if tr.mofn is not None:
-            state = tr.mofn.record(hit)
-            if state == "confirmed":
-                tr.confirmed = True
-                tr.mofn = None
-                self._count("confirmed")
-            elif state == "failed":
-                self._drop(tr, "unconfirmed")
-            return
-        if hit:
-            tr.emitter_misses = 0
-            return
-        tr.emitter_misses += 1
-        n_miss = self.settings.emitter_misses
-        if n_miss is not None and tr.emitter_misses >= n_miss:
-            # its emitter is elsewhere: the track took another UAV (or the emitter is a UAV
-            # on the ground); the emitter's next fix links anew
-            tr.emitter = None
-            tr.emitter_misses = 0
-            self._count("emitter_unlinked")
-        self._reject(tr)
-
-
-class MultiGrid(EpochClock):
-    """The confirmed tracks at every grid epoch ``k / frequency_hz``, emitted as processed time
-    passes it (the same for a live node and an offline run): call :meth:`before` with an
-    item's time before feeding the item to the tracker, :meth:`advance` when everything up to
-    a time has been processed. Each track the tracker publishes (:meth:`MultiTracker.outputs`)
-    is predicted to the epoch, while its last accepted measurement is at most the profile's
-    ``max_coast_s`` old. No epoch before ``t0`` (default: the first time seen) or after
-    ``t1``."""
-
-    def __init__(
-        self,
-        tracker: MultiTracker,
-        frequency_hz: float,
-        t0: float | None = None,
-        t1: float | None = None,
-    ) -> None:
-        super().__init__(frequency_hz, t0, t1)
-        self.tracker = tracker
-        self.max_coast_s = tracker.profile.max_coast_s
-
-    def _epochs(self, ks: list[int]) -> list[GridEpoch]:
-        out: list[GridEpoch] = []
-        mc = self.max_coast_s
-        for k in ks:
-            g = self.epoch_time(k)
-            tracks = tuple(
-                o
-                for o in self.tracker.outputs(g)
-                if o.t <= g and (mc is None or g - o.last_update_t <= mc)
-            )
-            out.append(GridEpoch(g, tracks))
-        return out
-
-    def before(self, t: float) -> list[GridEpoch]:
-        """An item at ``t`` is about to be processed: every epoch before ``t``."""
-        return self._epochs(self.take(t, inclusive=False))
-
-    def advance(self, t: float) -> list[GridEpoch]:
-        """Everything up to ``t`` has been processed: every epoch up to ``t``."""
-        return self._epochs(self.take(t, inclusive=True))
+        """One RF attempt: to the track of its emitter (:mod:`.emitters`)."""
+        self.emitters.fix(att)
 
 
 def run_multi(
@@ -745,65 +592,5 @@ def run_multi(
 ) -> list[GridEpoch]:
     """Drive ``tracker`` over ``stream`` (time order) with its output at ``grid_hz`` on
     ``[t_start, t_end]``: its confirmed tracks at every epoch."""
-    tracker.grid = MultiGrid(tracker, grid_hz, t_start, t_end)
+    tracker.grid = MultiGrid(tracker, grid_hz, t_start, t_end, tracker.profile.max_coast_s)
     return drive(tracker, stream, t_end).tracks
-
-
-def velocity_nis(
-    x: list[float], p: list[float], vel_ned: tuple[float, float, float] | None, s2: float
-) -> float:
-    """NIS (3 dof) of a reported NED velocity against the velocity of the state ``x`` whose
-    6x6 covariance is packed in ``p`` (upper triangle by rows), plus ``s2`` on each axis; 0
-    for a report without a velocity or a singular sum."""
-    if vel_ned is None:
-        return 0.0
-    q = _quad3(
-        vel_ned[1] - x[3], vel_ned[0] - x[4], -vel_ned[2] - x[5],
-        p[15] + s2, p[16], p[17], p[18] + s2, p[19], p[20] + s2,
-    )  # fmt: skip
-    return 0.0 if q is None else q
-
-
-def _merge_nis(
-    xa: list[float], pa: list[float], xb: list[float], pb: list[float], k: int
-) -> float | None:
-    """Squared Mahalanobis distance of two states' positions (the first ``k`` = 2 or 3 axes)
-    on the sum of their covariances (packed upper triangles); None when the sum is
-    singular."""
-    d0 = xa[0] - xb[0]
-    d1 = xa[1] - xb[1]
-    s00 = pa[0] + pb[0]
-    s01 = pa[1] + pb[1]
-    s11 = pa[6] + pb[6]
-    if k == 2:
-        det = s00 * s11 - s01 * s01
-        if det == 0.0:
-            return None
-        q = (d0 * (s11 * d0 - s01 * d1) + d1 * (s00 * d1 - s01 * d0)) / det
-        return q if math.isfinite(q) else None
-    return _quad3(
-        d0, d1, xa[2] - xb[2], s00, s01, pa[2] + pb[2], s11, pa[7] + pb[7], pa[11] + pb[11]
-    )
-
-
-def _quad3(
-    d0: float, d1: float, d2: float,
-    s00: float, s01: float, s02: float, s11: float, s12: float, s22: float,
-) -> float | None:  # fmt: skip
-    """``d^T S^-1 d`` for a symmetric 3x3 ``S`` (upper triangle), by its adjugate; None when
-    ``S`` is singular or the result is not finite."""
-    i00 = s11 * s22 - s12 * s12
-    i01 = s02 * s12 - s01 * s22
-    i02 = s01 * s12 - s02 * s11
-    det = s00 * i00 + s01 * i01 + s02 * i02
-    if det == 0.0:
-        return None
-    i11 = s00 * s22 - s02 * s02
-    i12 = s01 * s02 - s00 * s12
-    i22 = s00 * s11 - s01 * s01
-    q = (
-        d0 * (i00 * d0 + i01 * d1 + i02 * d2)
-        + d1 * (i01 * d0 + i11 * d1 + i12 * d2)
-        + d2 * (i02 * d0 + i12 * d1 + i22 * d2)
-    ) / det
-    return q if math.isfinite(q) else None

@@ -70,72 +70,16 @@ its last report that was not a coast, :attr:`RadarObject.kf_t`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from uav_fusion.core.estimators.components import RadarRModel
 from uav_fusion.core.estimators.kalman import CvKalman, PackedR
+from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import RadarTrack
 
+if TYPE_CHECKING:
+    from uav_fusion.core.estimators.parts import RadarRModel
+
 RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
-
-
-@dataclass(frozen=True)
-class ScoreConfig:
-    """Weights and thresholds of the UAV score: a profile's ``association`` groups (each key
-    and the field it sets: :mod:`~uav_fusion.core.estimators.schema`)."""
-
-    class_weight: float = 1.0
-    class_tau_s: float = 8.0
-    class_clip: float = 3.0
-    stationary_speed_mps: float = 1.5
-    stationary_min_age_s: float = 8.0
-    stationary_weight: float = 5.0
-    ground_alt_m: float = 4.0
-    ground_weight: float = 3.0
-    ground_release_sigmas: float = 0.0
-    vehicle_min_rcs_dbsm: float = -100.0  # -100: every low moving object may be a vehicle
-    below_ground_m: float = 5.0
-    below_ground_weight: float = 8.0
-    below_ground_sigmas: float = 0.0
-    erratic_nis: float = 6.0
-    bird_rcs_dbsm: float = -15.0
-    erratic_weight: float = 2.0
-    large_rcs_dbsm: float = 100.0  # 100: off
-    large_rcs_weight: float = 5.0
-    rf_weight: float = 1.0
-    rf_tau_s: float = 30.0
-    rf_max: float = 3.0
-    rf_window_s: float = 3.0
-    rf_support_max_cep_m: float = 0.0
-    rf_memory_s: float = 0.0
-    fused_weight: float = 1.5
-    fused_tau_s: float = 10.0
-    fused_nis: float = 3.0
-    lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
-    reach_margin_m: float = 0.0  # single-UAV tracker: 0: no reach gate (Tracker._reachable)
-    age_weight: float = 0.5
-    age_full_s: float = 10.0
-    object_q: float = 5.0
-    object_floor_m: float = 10.0
-    speed_tau_s: float = 5.0
-    follow_min: float = 0.0
-    init_min: float = 1.0
-    init_min_reports: int = 4
-    skip_radar_coasts: bool = False
-    rf_nearest_only: bool = False
-    challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
-    challenge_margin: float = 0.5
-    # a young radar track's class output leans to the classifier's prior (module text); None:
-    # every report's logit taken as it is
-    class_prior_logit: float | None = None
-    class_age_tau_s: float = 4.0
-    class_min_weight: float = 0.4
-    # ... and, while the object is younger than class_range_age_s, for its range: the weight is
-    # also multiplied by exp(-range / class_range_scale_m) (0: off). Not profile keys: the
-    # multi-UAV tracker sets them (MultiSettings); module text
-    class_range_scale_m: float = 0.0
-    class_range_age_s: float = 0.0
-
 
 
 def _ema(old: float, new: float, dt: float, tau: float) -> float:
@@ -289,43 +233,22 @@ class ObjectTable:
         sig = (vel, rcs)
         old = obj.signature
         coast = old is not None and vel is not None and sig == old
+        # one smoothing factor per time constant for this interval (the EMAs below)
+        tau = cfg.speed_tau_s
         if kf is None or dt < 0:
-            q = cfg.object_q
-            kf = obj.kf = CvKalman((q, q, q))
-            kf.x = [e, n, u, 0.0, 0.0, 0.0]
-            v = 100.0
-            kf.P = [
-                r[0], r[1], r[2], 0.0, 0.0, 0.0,
-                r[3], r[4], 0.0, 0.0, 0.0,
-                r[5], 0.0, 0.0, 0.0,
-                v, 0.0, 0.0,
-                v, 0.0,
-                v,
-            ]  # fmt: skip
+            kf = self._start_filter(obj, t, e, n, u, r, rcs)
             dt = 0.0
-            obj.kf_t = t
-            obj.up = u
-            obj.sd_up = math.sqrt(r[5])
-            if rcs is not None and math.isfinite(rcs):
-                obj.rcs_mean = rcs
-                obj.rcs_seen = True
-            else:
-                obj.rcs_mean = 0.0
-            # one smoothing factor per time constant for this interval (the EMAs below)
-            a = 0.0 if cfg.speed_tau_s <= 0 else 1.0
-            b = 1.0 - a
+            a = 0.0 if tau <= 0 else 1.0
         else:
-            # one smoothing factor per time constant for this interval (the EMAs below)
-            tau = cfg.speed_tau_s
             a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
-            b = 1.0 - a
             if not (coast and cfg.skip_radar_coasts):
                 # a coast is the radar's own prediction: no new measurement for the filter
-                nis = kf.predict_update3(t - obj.kf_t, e, n, u, r)
+                kf.predict(t - obj.kf_t)
+                nis = kf.update3(e, n, u, r)
                 obj.kf_t = t
                 if math.isfinite(nis):
                     # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
-                    obj.nis_mean = a * obj.nis_mean + b * (100.0 if nis > 100.0 else nis)
+                    obj.nis_mean = a * obj.nis_mean + (1.0 - a) * (100.0 if nis > 100.0 else nis)
         if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
             vn, ve, vd = vel
             spd = math.sqrt(vn * vn + ve * ve + vd * vd)
@@ -335,62 +258,116 @@ class ObjectTable:
         if n_reports == 0:
             obj.speed = spd
         else:
-            obj.speed = a * obj.speed + b * spd
-            obj.up = a * obj.up + b * u
-            obj.sd_up = a * obj.sd_up + b * math.sqrt(r[5])
-            if rcs is not None and math.isfinite(rcs):
-                if obj.rcs_seen:
-                    obj.rcs_mean = a * obj.rcs_mean + b * rcs
-                else:
-                    obj.rcs_mean = rcs
-                    obj.rcs_seen = True
-            k = cfg.ground_release_sigmas
-            if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
-                obj.aloft = True
+            self._fold_motion(obj, spd, u, r[5], rcs, a)
         p = trk.uav_prob
         if p is not None and math.isfinite(p):
-            # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
-            c = cfg.class_clip
-            pc = 1e-6 if p < 1e-6 else p
-            if pc > 1.0 - 1e-6:
-                pc = 1.0 - 1e-6
-            lg = math.log(pc / (1.0 - pc))
-            prior = cfg.class_prior_logit
-            if prior is not None:
-                # the report's distance from the prior, for the track's age
-                age = t - obj.first_t
-                w = 1.0 - math.exp(-age / cfg.class_age_tau_s)
-                rng_m = trk.range_m
-                if (
-                    age < cfg.class_range_age_s
-                    and cfg.class_range_scale_m > 0.0
-                    and rng_m is not None
-                    and math.isfinite(rng_m)
-                ):
-                    # a far track's classifier has fewer features to go on: its output leaves
-                    # the prior more slowly
-                    w *= math.exp(-rng_m / cfg.class_range_scale_m)
-                if w < cfg.class_min_weight:
-                    w = cfg.class_min_weight
-                lg = prior + (lg - prior) / w
-            if c < lg:
-                lg = c
-            if -c > lg:
-                lg = -c
-            if n_reports == 0:  # with a prior (and a history) the history starts there
-                obj.class_logit = lg if prior is None or cfg.class_tau_s <= 0 else prior
-            else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
-                tau = cfg.class_tau_s
-                if tau <= 0:
-                    obj.class_logit = lg
-                else:
-                    a = math.exp(-dt / tau) if dt > 0 else 1.0
-                    obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
+            self._fold_class(obj, trk, p, dt, n_reports == 0)
         obj.coasting = coast
         obj.signature = sig
         obj.n_reports = n_reports + 1
         obj.last_t = t
         return obj
+
+    def _start_filter(
+        self,
+        obj: RadarObject,
+        t: float,
+        e: float,
+        n: float,
+        u: float,
+        r: PackedR,
+        rcs: float | None,
+    ) -> CvKalman:
+        """(Re)start the object's filter at a report (its first, or one older than its last)
+        and the running height and RCS at the report's."""
+        q = self.cfg.object_q
+        kf = obj.kf = CvKalman((q, q, q))
+        kf.x = [e, n, u, 0.0, 0.0, 0.0]
+        v = 100.0
+        kf.P = [
+            r[0], r[1], r[2], 0.0, 0.0, 0.0,
+            r[3], r[4], 0.0, 0.0, 0.0,
+            r[5], 0.0, 0.0, 0.0,
+            v, 0.0, 0.0,
+            v, 0.0,
+            v,
+        ]  # fmt: skip
+        obj.kf_t = t
+        obj.up = u
+        obj.sd_up = math.sqrt(r[5])
+        if rcs is not None and math.isfinite(rcs):
+            obj.rcs_mean = rcs
+            obj.rcs_seen = True
+        else:
+            obj.rcs_mean = 0.0
+        return kf
+
+    def _fold_motion(
+        self, obj: RadarObject, spd: float, u: float, r_uu: float, rcs: float | None, a: float
+    ) -> None:
+        """Fold a report after the first into the object's moving averages of speed, height,
+        vertical sigma (``r_uu``: the report's vertical variance) and RCS, with the
+        smoothing factor ``a`` of the interval, and note when it has risen clear of the
+        ground."""
+        cfg = self.cfg
+        b = 1.0 - a
+        obj.speed = a * obj.speed + b * spd
+        obj.up = a * obj.up + b * u
+        obj.sd_up = a * obj.sd_up + b * math.sqrt(r_uu)
+        if rcs is not None and math.isfinite(rcs):
+            if obj.rcs_seen:
+                obj.rcs_mean = a * obj.rcs_mean + b * rcs
+            else:
+                obj.rcs_mean = rcs
+                obj.rcs_seen = True
+        k = cfg.ground_release_sigmas
+        if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
+            obj.aloft = True
+
+    def _fold_class(
+        self, obj: RadarObject, trk: RadarTrack, p: float, dt: float, first: bool
+    ) -> None:
+        """Fold a report's UAV class probability ``p`` (finite) into the object's class
+        history (``dt`` since its previous report; ``first``: its first report), read for
+        the track's age and range when the profile sets a class prior (module text)."""
+        cfg = self.cfg
+        # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
+        c = cfg.class_clip
+        pc = 1e-6 if p < 1e-6 else p
+        if pc > 1.0 - 1e-6:
+            pc = 1.0 - 1e-6
+        lg = math.log(pc / (1.0 - pc))
+        prior = cfg.class_prior_logit
+        if prior is not None:
+            # the report's distance from the prior, for the track's age
+            age = trk.t - obj.first_t
+            w = 1.0 - math.exp(-age / cfg.class_age_tau_s)
+            rng_m = trk.range_m
+            if (
+                age < cfg.class_range_age_s
+                and cfg.class_range_scale_m > 0.0
+                and rng_m is not None
+                and math.isfinite(rng_m)
+            ):
+                # a far track's classifier has fewer features to go on: its output leaves
+                # the prior more slowly
+                w *= math.exp(-rng_m / cfg.class_range_scale_m)
+            if w < cfg.class_min_weight:
+                w = cfg.class_min_weight
+            lg = prior + (lg - prior) / w
+        if c < lg:
+            lg = c
+        if -c > lg:
+            lg = -c
+        if first:  # with a prior (and a history) the history starts there
+            obj.class_logit = lg if prior is None or cfg.class_tau_s <= 0 else prior
+        else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
+            tau = cfg.class_tau_s
+            if tau <= 0:
+                obj.class_logit = lg
+            else:
+                a = math.exp(-dt / tau) if dt > 0 else 1.0
+                obj.class_logit = a * obj.class_logit + (1.0 - a) * lg
 
     def mark_fused(self, obj: RadarObject, inside: bool, t: float) -> None:
         """Record whether the object's report at ``t`` fell inside the UAV track's gate."""

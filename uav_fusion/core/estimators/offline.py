@@ -14,11 +14,11 @@ import numpy.typing as npt
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators.base import drive, make_estimator
 from uav_fusion.core.estimators.paper import FusionEstimator
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import StreamInfo, StreamItem, input_info
 from uav_fusion.core.estimators.smoothing import Filtered, fixed_lag
 from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site
 

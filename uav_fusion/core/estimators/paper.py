@@ -36,15 +36,16 @@ filter step, as in the paper.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
 from uav_fusion.core.estimators.kalman import CvKalman, PackedR, expand_cov3, pack_r
-from uav_fusion.core.estimators.profile import Profile
 from uav_fusion.core.estimators.selection import selected_input
 from uav_fusion.core.estimators.steps import (
     COASTED,
@@ -58,6 +59,7 @@ from uav_fusion.core.estimators.steps import (
     nis_gate,
     pack_state,
 )
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import (
     RADAR,
     RF,
@@ -72,7 +74,7 @@ from uav_fusion.core.site import Site
 FloatArray = npt.NDArray[np.float64]
 
 #: how many recent measurements the interface keeps for :meth:`FusionEstimator.measurement`
-_RECENT = 4096
+_RECENT = 1024
 _DIMS = {RADAR: 3, RF: 2}
 _MEAS_KEY = {RADAR: "radar_measurements", RF: "rf_measurements"}
 _UPD_KEY = {RADAR: "updated_radar", RF: "updated_rf"}
@@ -131,6 +133,17 @@ class FusionEstimator:
         self.grid = StepGrid(profile, grid_hz, t0, t1) if grid_hz is not None else None
         self._seq = 0
         self._recent: dict[int, Measurement] = {}
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> FusionEstimator:
+        """A copy for a rewind (:mod:`uav_fusion.core.live.rewind`): the recent measurements
+        are never changed, so the copy shares them."""
+        for m in self._recent.values():
+            memo[id(m)] = m
+        new = FusionEstimator.__new__(FusionEstimator)
+        memo[id(self)] = new
+        for k, v in self.__dict__.items():
+            setattr(new, k, copy.deepcopy(v, memo))
+        return new
 
     # --- the estimator interface (uav_fusion.core.estimators.base) ----------------------
     def radar_frame(self, frame: RadarFrame) -> Outputs:

@@ -31,7 +31,7 @@ import numpy as np
 
 from uav_fusion.core.data.uav_class import uav_class_tracks
 from uav_fusion.core.estimators.kalman import PackedR
-from uav_fusion.core.estimators.profile import Profile, load_profile
+from uav_fusion.core.profiles.model import Profile, load_profile
 from uav_fusion.core.records import (
     RADAR,
     RF,
@@ -225,6 +225,6 @@ def report_covariance(profile: Profile, site: Site) -> Callable[[float, float, f
     """The ENU covariance (packed upper triangle xx, xy, xz, yy, yz, zz) that ``profile``'s
     radar model gives a report at (e, n, u): the fixed R of the paper profile, the polar
     model's R of a tracker profile. Published with every report on ``radar/tracks``."""
-    from uav_fusion.core.estimators.tracker import radar_model_from_profile
+    from uav_fusion.core.estimators.parts import radar_model_from_profile
 
     return radar_model_from_profile(profile, site).r_at

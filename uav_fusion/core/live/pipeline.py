@@ -2,20 +2,21 @@
 
 A live consumer (the fusion node) hands every decoded message to a :class:`Pipeline`: a radar
 frame (:meth:`Pipeline.radar`; a frame without reports only moves the radar stream on) or RF
-attempts (:meth:`Pipeline.rf`; a failed attempt only moves the RF stream on). The pipeline
-puts them back into the offline run's order and hands them to the estimator
-(:mod:`uav_fusion.core.estimators.base`); every call returns the
-:class:`~uav_fusion.core.estimators.grid.Outputs` that became final.
+attempts (:meth:`Pipeline.rf`; a failed attempt only moves the RF stream on). Every call
+returns the :class:`~uav_fusion.core.estimators.grid.Outputs` that became final. Two ways to
+order the inputs:
 
-**Time order.** Messages of different topics arrive in any interleaving. Each stream is FIFO
-in its own time, so an item stamped ``t`` is released when nothing earlier can still come:
-every stream has delivered something strictly later than ``t``, or the watermark (the latest
-stamp seen, or the simulated clock) is ``reorder_window_s`` past ``t``. Radar items sharing a
-stamp are released together as one frame. Order of release: time, then source (radar before
-RF), then arrival. An item arriving after something later was released is *late*: dropped
-and counted (``late_<source>``), since fusing it would change the filter's past.
+- **Zero wait** (``reorder_window_s`` = 0, the default): every input is fused the moment it
+  arrives; one later than something already fused, but at most ``max_lag_s`` behind the
+  latest time fused, is fused by rewinding the estimator and re-filtering what came after it
+  (:mod:`uav_fusion.core.live.rewind`), so once the late data is in, the track is exactly the
+  one of processing everything in order. An input older than that is dropped as late.
+- **Reorder window** (``reorder_window_s`` > 0): inputs wait in a reorder buffer until
+  nothing earlier can still come (:mod:`uav_fusion.core.live.reorder`), at most
+  ``reorder_window_s`` of sensor time; an input later than that is dropped as late. Nothing
+  is ever fused out of order, at the price of that wait.
 
-**Stamp policy.**
+**Stamp policy** (both ways):
 
 - *Duplicates*: a message equal to one of the last ``duplicate_memory`` of its stream (same
   stamp, same positions) is dropped as ``<source>_duplicate`` (a restarted replay re-sends
@@ -31,24 +32,24 @@ and counted (``late_<source>``), since fusing it would change the filter's past.
   bag loop) does the same (:attr:`Pipeline.clock_jumps_back`).
 
 Starting a new timeline processes what is buffered, drops held stamps as ``future``,
-restarts the estimator (:meth:`~uav_fusion.core.estimators.base.Estimator.restart`) and
-empties the buffer and the duplicate memory.
+restarts the estimator and forgets every input and repeat.
 
 Pure Python, no ROS.
 """
 
 from __future__ import annotations
 
-import heapq
 import math
 from collections import Counter, deque
-from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
-from typing import Generic, TypeVar
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TypeVar
 
 from uav_fusion.core.errors import UavFusionError
 from uav_fusion.core.estimators.base import Estimator
 from uav_fusion.core.estimators.grid import Outputs
+from uav_fusion.core.live.reorder import Batch, ReorderBuffer
+from uav_fusion.core.live.rewind import Rewinder
 from uav_fusion.core.records import RADAR, RF, RadarFrame, RfAttempt
 
 T = TypeVar("T")
@@ -61,134 +62,13 @@ STALL_CAP_S = 60.0
 Item = RadarFrame | RfAttempt
 
 
-# --- time order ----------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Batch(Generic[T]):
-    """One release: a single item, or all items of a grouped source sharing one stamp."""
-
-    t: float
-    source: str
-    items: list[T]
-
-
-@dataclass(order=True)
-class _Entry(Generic[T]):
-    t: float
-    rank: int
-    arrival: int
-    source: str = field(compare=False)
-    item: T = field(compare=False)
-
-
-class ReorderBuffer(Generic[T]):
-    """Time-ordering buffer over named streams (the module text's "Time order").
-
-    ``sources`` are the streams expected to progress (their order is also the tie-break rank
-    for equal stamps); ``grouped`` are the sources whose equal-stamp items form one frame.
-    """
-
-    def __init__(self, window_s: float, sources: Iterable[str], grouped: Iterable[str] = ()):
-        if not (window_s >= 0.0 and math.isfinite(window_s)):
-            raise ValueError(f"window_s must be finite and >= 0, got {window_s}")
-        self.window_s = float(window_s)
-        self.sources: tuple[str, ...] = tuple(sources)
-        if not self.sources:
-            raise ValueError("at least one source is needed")
-        self._rank = {s: i for i, s in enumerate(self.sources)}
-        self.grouped = frozenset(grouped)
-        self._heap: list[_Entry[T]] = []
-        self._arrivals = 0
-        self._latest: dict[str, float] = {}
-        self._watermark = -math.inf
-        self._released: tuple[float, int] | None = None  # (t, rank) of the last release
-        self.late: Counter[str] = Counter()
-        self.max_depth = 0
-        self.released_count = 0
-
-    def _rank_of(self, source: str) -> int:
-        if source not in self._rank:
-            raise ValueError(f"unknown source '{source}' (expected one of {self.sources})")
-        return self._rank[source]
-
-    def is_late(self, t: float, source: str) -> bool:
-        """Would an item (t, source) arrive too late to be processed in order?"""
-        if self._released is None:
-            return False
-        rt, rrank = self._released
-        rank = self._rank_of(source)
-        if source in self.grouped:  # a frame member must not follow its own frame's release
-            return (t, rank) <= (rt, rrank)
-        return (t, rank) < (rt, rrank)
-
-    def note(self, source: str, t: float) -> None:
-        """Record progress of a stream without an item (e.g. a failed RF attempt)."""
-        self._rank_of(source)
-        if t > self._latest.get(source, -math.inf):
-            self._latest[source] = t
-        self._watermark = max(self._watermark, t)
-
-    def push(self, source: str, t: float, item: T) -> bool:
-        """Add an item; False (and counted in :attr:`late`) if it arrived too late."""
-        rank = self._rank_of(source)
-        if not math.isfinite(t):
-            raise ValueError(f"item time must be finite, got {t}")
-        if self.is_late(t, source):
-            self.late[source] += 1
-            return False
-        heapq.heappush(self._heap, _Entry(t, rank, self._arrivals, source, item))
-        self._arrivals += 1
-        self.max_depth = max(self.max_depth, len(self._heap))
-        self.note(source, t)
-        return True
-
-    @property
-    def pending(self) -> int:
-        return len(self._heap)
-
-    @property
-    def watermark(self) -> float:
-        return self._watermark
-
-    def release(self, clock: float | None = None) -> list[Batch[T]]:
-        """Release every item that can no longer be preceded by a new arrival (``clock``: an
-        external time, e.g. the simulated clock, that counts as a watermark too)."""
-        wm = self._watermark if clock is None else max(self._watermark, clock)
-        bound_window = wm - self.window_s
-        complete = all(s in self._latest for s in self.sources)
-        bound_streams = min(self._latest[s] for s in self.sources) if complete else -math.inf
-        out: list[Batch[T]] = []
-        while self._heap:
-            head = self._heap[0]
-            # strictly before every stream's latest stamp, or at least window_s old
-            if not (head.t < bound_streams or head.t <= bound_window):
-                break
-            out.append(self._pop_batch())
-        return out
-
-    def flush(self) -> list[Batch[T]]:
-        """Release everything held (end of stream)."""
-        out: list[Batch[T]] = []
-        while self._heap:
-            out.append(self._pop_batch())
-        return out
-
-    def _pop_batch(self) -> Batch[T]:
-        head = heapq.heappop(self._heap)
-        items = [head.item]
-        if head.source in self.grouped:
-            while self._heap and self._heap[0].source == head.source and self._heap[0].t == head.t:
-                items.append(heapq.heappop(self._heap).item)
-        self._released = (head.t, head.rank)
-        self.released_count += len(items)
-        return Batch(head.t, head.source, items)
-
-
 # --- the pipeline --------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PipelineConfig:
     """The stamp policy's settings (the fusion node's parameters of the same names)."""
 
-    reorder_window_s: float = 2.0
+    reorder_window_s: float = 0.0  # 0: zero wait (rewind late inputs up to max_lag_s)
+    max_lag_s: float = 10.0
     max_future_s: float = 30.0
     late_run_reset: int = 50  # 0 = never
     clock_jump_back_s: float = 1.0
@@ -215,9 +95,12 @@ class Pipeline:
         config: PipelineConfig | None = None,
         warn: Callable[[str], None] = _ignore,
     ) -> None:
-        self.estimator = estimator
         self.config = config or PipelineConfig()
         self.warn = warn
+        c = self.config
+        #: zero wait: late inputs re-filtered (None: a reorder window orders the inputs)
+        self.rewinder = Rewinder(estimator, c.max_lag_s) if c.reorder_window_s <= 0 else None
+        self._estimator = estimator
         self.buffer: ReorderBuffer[Item] = self._new_buffer()
         #: drops: ``<source>_duplicate``, ``<source>_future``, ``late_<source>``, and
         #: ``<source>_refused`` (the estimator raised on the input)
@@ -229,6 +112,7 @@ class Pipeline:
         self._seen_order: dict[str, deque[tuple[float, ...]]] = {s: deque() for s in self.sources}
         self._last_clock: float | None = None
         self._late_run = 0
+        self._watermark = -math.inf
         self.clock_jumps_back = 0
         self.timeline_resets = 0
         #: the latest time handed to the estimator (-inf: none yet)
@@ -236,18 +120,30 @@ class Pipeline:
         self._out = Outputs()
 
     def _new_buffer(self) -> ReorderBuffer[Item]:
-        return ReorderBuffer(self.config.reorder_window_s, self.sources, grouped=(RADAR,))
+        window = max(self.config.reorder_window_s, 0.0)
+        return ReorderBuffer(window, self.sources, grouped=(RADAR,))
 
     # --- state ----------------------------------------------------------------------------
     @property
+    def estimator(self) -> Estimator:
+        """The estimator (zero wait: the one a rewind went back to)."""
+        rw = self.rewinder
+        return rw.estimator if rw is not None else self._estimator
+
+    @property
     def pending(self) -> int:
-        """Items in the reorder buffer."""
+        """Items waiting in the reorder buffer."""
         return self.buffer.pending
 
     @property
     def holding(self) -> bool:
         """True while a far-ahead stamp waits for confirmation."""
         return any(self.held.values())
+
+    @property
+    def watermark(self) -> float:
+        """The latest stamp seen on any stream."""
+        return max(self._watermark, self.buffer.watermark)
 
     # --- input ----------------------------------------------------------------------------
     def radar(self, frame: RadarFrame, clock: float | None = None) -> Outputs:
@@ -276,7 +172,7 @@ class Pipeline:
         """End of input: drop unconfirmed held stamps as ``future``, process the whole buffer
         and finish the estimator's smoothing windows."""
         self._flush()
-        self._out.add(self.estimator.finish())
+        self._finish()
         return self._take()
 
     def stall(self, t: float) -> Outputs:
@@ -288,7 +184,8 @@ class Pipeline:
         target = min(t, self.processed_t + (cap if cap is not None else STALL_CAP_S))
         if target <= self.processed_t:
             return Outputs()
-        return self.estimator.advance(target)
+        rw = self.rewinder
+        return rw.advance(target) if rw is not None else self._estimator.advance(target)
 
     def check_clock(self, clock: float | None) -> None:
         """Note the simulated clock (None: no clock); a backwards jump restarts the timeline."""
@@ -329,7 +226,7 @@ class Pipeline:
         if len(order) > self.config.duplicate_memory:
             seen.discard(order.popleft())
         horizon = self.config.max_future_s
-        wm = self.buffer.watermark
+        wm = self.watermark
         ref = wm if clock is None else max(clock, wm)
         held = self.held[source]
         if not math.isfinite(ref) or t <= ref + horizon:
@@ -358,22 +255,48 @@ class Pipeline:
     def _enter(self, source: str, t: float, item: Item, clock: float | None) -> None:
         if isinstance(item, RadarFrame) and not item.tracks:
             self.empty["radar_empty_frame"] += 1
-            self.buffer.note(source, t)
+            self._note(source, t)
             return
         if isinstance(item, RfAttempt) and not item.ok:
             self.empty["rf_failed_attempt"] += 1
-            self.buffer.note(source, t)
+            self._note(source, t)
+            return
+        rw = self.rewinder
+        if rw is not None:
+            self._watermark = max(self._watermark, t)
+            try:
+                got = rw.fuse(source, t, item)
+            except UavFusionError as exc:  # the estimator refused the input: count, go on
+                self.dropped[f"{source}_refused"] += 1
+                self.warn(f"estimator refused {source} at {t:.3f}: {exc}")
+                return
+            if got is None:
+                self._late(source, t, f"more than max_lag_s {rw.max_lag_s:g} s behind")
+                return
+            self._late_run = 0
+            self._out.add(got)
+            self.processed_t = max(self.processed_t, t)
             return
         if not self.buffer.push(source, t, item):
-            self._count(
-                f"late_{source}",
-                f"{source} measurement at {t:.3f} arrived after later ones were processed "
-                f"(reorder window {self.buffer.window_s:g} s): dropped",
-            )
-            self._note_stale()
+            self._late(source, t, f"reorder window {self.buffer.window_s:g} s")
             return
         self._late_run = 0
         self._release(clock)
+
+    def _note(self, source: str, t: float) -> None:
+        """A stream moved on without anything to fuse."""
+        if self.rewinder is not None:
+            self._watermark = max(self._watermark, t)
+        else:
+            self.buffer.note(source, t)
+
+    def _late(self, source: str, t: float, why: str) -> None:
+        self._count(
+            f"late_{source}",
+            f"{source} measurement at {t:.3f} arrived after later ones were processed "
+            f"({why}): dropped",
+        )
+        self._note_stale()
 
     def _release(self, clock: float | None) -> None:
         if self.buffer.pending:
@@ -387,8 +310,12 @@ class Pipeline:
         self._process(self.buffer.flush())
         return n
 
+    def _finish(self) -> None:
+        rw = self.rewinder
+        self._out.add(rw.finish() if rw is not None else self._estimator.finish())
+
     def _process(self, batches: Sequence[Batch[Item]]) -> None:
-        est = self.estimator
+        est = self._estimator
         out = self._out
         for b in batches:
             try:
@@ -412,9 +339,14 @@ class Pipeline:
     def _restart(self, reason: str) -> int:
         """Finish the old timeline and start a new one; returns the items processed."""
         n = self._flush()
-        self._out.add(self.estimator.finish())
-        self.estimator.restart(reason)
+        self._finish()
+        rw = self.rewinder
+        if rw is not None:
+            rw.restart(reason)
+        else:
+            self._estimator.restart(reason)
         self.processed_t = -math.inf
+        self._watermark = -math.inf
         self.buffer = self._new_buffer()
         for src in self._seen:  # a loop repeats the same messages: they are new again
             self._seen[src].clear()
@@ -446,8 +378,7 @@ class Pipeline:
             self.timeline_resets += 1
             n = self._restart("timeline_back")
             self.warn(
-                f"{limit} messages in a row were late for the reorder window or repeats: the "
-                "input timeline went back (a bag loop without /clock, or an earlier jump "
-                f"ahead that was wrong); processed {n} buffered measurement(s), reset the "
-                "filter and the reorder buffer"
+                f"{limit} messages in a row were late or repeats: the input timeline went "
+                "back (a bag loop without /clock, or an earlier jump ahead that was wrong); "
+                f"processed {n} buffered measurement(s), reset the filter and the reorder buffer"
             )

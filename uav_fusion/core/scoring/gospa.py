@@ -73,7 +73,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -81,7 +81,15 @@ import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
+from uav_fusion.core.scoring.continuity import KeptCorrespondence, fragmentations, id_switch_indices
 from uav_fusion.core.scoring.metrics import interpolate_truth
+from uav_fusion.core.scoring.outcomes import (
+    EpochAssignment,
+    FlightSamples,
+    MultiScore,
+    UavSamples,
+    UavScore,
+)
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -244,180 +252,6 @@ class MultiScoreSettings:
             raise ValueError(f"grid step must be a finite number > 0, got {self.step_s}")
 
 
-# --- per-flight samples and scores ---------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class UavSamples:
-    """One UAV's per-epoch outcomes in one flight (kept so flights can be pooled exactly)."""
-
-    name: str
-    epochs: int  # airborne epochs
-    assigned: int  # ... with an assigned track
-    errors: FloatArray  # 3D error at each assigned epoch
-    track_ids: tuple[int | None, ...]  # per airborne epoch: the assigned track id, or None
-    id_switches: int
-    fragmentations: int
-    times: FloatArray = field(default_factory=lambda: np.zeros(0))  # the airborne epochs
-    id_switches_kept: int = 0  # on the CLEAR MOT correspondence (module text)
-    switch_times: FloatArray = field(default_factory=lambda: np.zeros(0))  # of id_switches
-    switch_times_kept: FloatArray = field(default_factory=lambda: np.zeros(0))  # ... of the kept
-
-    def covered(self) -> npt.NDArray[np.bool_]:
-        """Per airborne epoch: a track was assigned within the cut-off."""
-        return np.array([tid is not None for tid in self.track_ids], dtype=bool)
-
-
-@dataclass(frozen=True)
-class EpochAssignment:
-    """One epoch's optimal assignment: (UAV name, track id) pairs and the false track ids."""
-
-    t: float
-    pairs: tuple[tuple[str, int], ...]
-    false_ids: tuple[int, ...]
-    excused: tuple[tuple[str, int], ...] = ()  # (UAV not airborne, track id) pairs
-
-
-@dataclass(frozen=True)
-class FlightSamples:
-    """One flight's per-epoch GOSPA and per-UAV outcomes."""
-
-    step_s: float
-    distance: FloatArray  # GOSPA per epoch, metres
-    localisation: FloatArray  # its parts per epoch (p-th powers of metres)
-    missed: FloatArray
-    false: FloatArray
-    false_estimates: int  # unassigned estimates summed over the epochs
-    uavs: tuple[UavSamples, ...]
-    assignments: tuple[EpochAssignment, ...]
-    excused_estimates: int = 0  # estimates excused on a UAV not airborne, over the epochs
-    p: float = 2.0  # the GOSPA exponent (the parts are p-th powers of metres)
-
-    @property
-    def epochs(self) -> int:
-        return int(self.distance.size)
-
-
-@dataclass(frozen=True)
-class UavScore:
-    """One UAV's figures over one or several flights (percentages in %)."""
-
-    name: str
-    flights: int
-    epochs: int
-    coverage_pct: float
-    err_mean_m: float
-    err_p50_m: float
-    err_p95_m: float
-    err_max_m: float
-    id_switches: int
-    fragmentations: int
-    id_switches_kept: int = 0
-
-    def as_dict(self) -> dict[str, str | float | int]:
-        return asdict(self)
-
-
-@dataclass(frozen=True)
-class MultiScore:
-    """The figures of one flight or of a pool of flights: all UAVs together, then each."""
-
-    flights: int
-    epochs: int  # grid epochs scored
-    uav_epochs: int  # airborne (UAV, epoch) pairs
-    coverage_pct: float
-    err_mean_m: float
-    err_p50_m: float
-    err_p95_m: float
-    err_max_m: float
-    id_switches: int
-    fragmentations: int
-    false_track_s: float
-    gospa_mean_m: float  # mean of the per-epoch GOSPA distance
-    localisation_mean: float  # means of its parts (p-th powers of metres)
-    missed_mean: float
-    false_mean: float
-    uavs: tuple[UavScore, ...]
-    id_switches_kept: int = 0
-    excused_track_s: float = 0.0  # track time excused on UAVs not airborne
-
-
-def id_switches(track_ids: Sequence[int | None]) -> int:
-    """Changes of the assigned track id from one assigned epoch to the next (None: none)."""
-    return len(id_switch_indices(track_ids))
-
-
-def id_switch_indices(track_ids: Sequence[int | None]) -> list[int]:
-    """The indices at which :func:`id_switches` counts a switch."""
-    out: list[int] = []
-    prev = None
-    for k, tid in enumerate(track_ids):
-        if tid is None:
-            continue
-        if prev is not None and tid != prev:
-            out.append(k)
-        prev = tid
-    return out
-
-
-def fragmentations(track_ids: Sequence[int | None]) -> int:
-    """Resumptions of assignment after unassigned epochs that followed an assigned one."""
-    n, seen, gap = 0, False, False
-    for tid in track_ids:
-        if tid is None:
-            gap = seen
-        else:
-            if gap:
-                n += 1
-            seen, gap = True, False
-    return n
-
-
-class _KeptCorrespondence:
-    """The CLEAR MOT correspondence, epoch by epoch, and the ID switches counted on it: a
-    UAV keeps its previous track while that track is published and closer than ``c_m``
-    (closest kept pairs first, one UAV per track); the remaining UAVs and tracks are assigned
-    by minimum total squared distance, pairs at ``c_m`` or more left unassigned."""
-
-    def __init__(self, c_m: float) -> None:
-        self.c_m = c_m
-        self.previous: dict[str, int] = {}
-        self.switches: dict[str, list[float]] = {}  # per UAV: the times of its switches
-
-    def step(
-        self, t: float, names: list[str], X: FloatArray, track_ids: list[int], Y: FloatArray
-    ) -> None:
-        if not names or not track_ids:
-            return
-        D = cdist(X, Y)
-        col = {tid: j for j, tid in enumerate(track_ids)}
-        match: dict[int, int] = {}
-        taken: set[int] = set()
-        held = sorted(
-            (float(D[i, col[self.previous[n]]]), i, col[self.previous[n]])
-            for i, n in enumerate(names)
-            if self.previous.get(n) in col
-        )
-        for d, i, j in held:
-            if d < self.c_m and j not in taken:
-                match[i] = j
-                taken.add(j)
-        rows = [i for i in range(len(names)) if i not in match]
-        cols = [j for j in range(len(track_ids)) if j not in taken]
-        if rows and cols:
-            sub = D[np.ix_(rows, cols)]
-            r, c = linear_sum_assignment(np.minimum(sub, self.c_m) ** 2)
-            for a, b in zip(r.tolist(), c.tolist(), strict=True):
-                if sub[a, b] < self.c_m:
-                    match[rows[a]] = cols[b]
-        for i, j in match.items():
-            n, tid = names[i], track_ids[j]
-            before = self.previous.get(n)
-            if before is not None and before != tid:
-                self.switches.setdefault(n, []).append(t)
-            self.previous[n] = tid
-
-
 def _check_truth(name: str, tr: UavTruth) -> tuple[FloatArray, FloatArray]:
     t = np.asarray(tr.t, dtype=float)
     enu = np.asarray(tr.enu, dtype=float)
@@ -499,7 +333,7 @@ def score_flight(
     errs: dict[str, list[float]] = {name: [] for name in names}
     n_false = n_excused = 0
     assignments: list[EpochAssignment] = []
-    kept = _KeptCorrespondence(s.gospa.c_m)
+    kept = KeptCorrespondence(s.gospa.c_m)
     for k, epoch in enumerate(outputs):
         present = [name for name in names if air[name][k]]
         tracks = list(epoch.tracks)
@@ -690,17 +524,3 @@ def epochs_from_published(
         )
         for k in range(k0, k1 + 1)
     ]
-
-
-def multi_summary(sc: MultiScore) -> str:
-    """One line of a multi-target score (for reports and logs)."""
-    per = "; ".join(
-        f"{u.name} {u.coverage_pct:.1f} % of {u.epochs} epochs, {u.id_switches} id switches "
-        f"({u.id_switches_kept} on kept correspondences)"
-        for u in sc.uavs
-    )
-    return (
-        f"GOSPA mean {sc.gospa_mean_m:.1f} m over {sc.epochs} epochs; coverage "
-        f"{sc.coverage_pct:.1f} %, error mean {sc.err_mean_m:.1f} m; false-track time "
-        f"{sc.false_track_s:.1f} s; {per}"
-    )

@@ -302,6 +302,87 @@ class Trajectory:
         return np.stack([pitch, yaw, roll], axis=1)
 
 
+def _leg_command(
+    targets: list[tuple[float, float, float, float]],
+    wi: int,
+    d: tuple[float, float, float],
+    dh: float,
+    stop: bool,
+    landing: bool,
+    dyn: FlightDynamics,
+) -> tuple[float, float, float]:
+    """The velocity command towards waypoint ``wi`` at the offset ``d`` (``dh`` its horizontal
+    length): the leg speed, slowed to take the corner at ``wi`` (to a stop when ``stop``: the
+    last waypoint or one with a hover) and capped near the last one; a climb or descent that
+    ends with the leg, or, when ``landing`` on the last leg, the landing rate over the spot."""
+    dx, dy, dz = d
+    tx, ty, _, sp = targets[wi]
+    last = wi == len(targets) - 1
+    if stop:
+        v_corner = 0.0
+    else:
+        nx, ny = targets[wi + 1][0] - tx, targets[wi + 1][1] - ty
+        nh = math.hypot(nx, ny)
+        if nh < 1e-6 or dh < 1e-6:
+            v_corner = dyn.corner_min_speed_mps
+        else:
+            cosang = (dx * nx + dy * ny) / (dh * nh)
+            half = 0.5 * math.acos(max(-1.0, min(1.0, cosang)))
+            v_corner = max(dyn.corner_min_speed_mps, sp * math.cos(half) ** 2)
+        v_corner = min(v_corner, targets[wi + 1][3], sp)
+    brake = 0.6 * dyn.accel_max_mps2
+    v_h = min(sp, math.sqrt(v_corner**2 + 2.0 * brake * max(dh - dyn.accept_radius_m, 0.0)))
+    if last:
+        v_h = min(v_h, 0.8 * dh)
+    if last and landing:
+        # descend at the landing rate once over the spot (within 2 accept radii)
+        v_z = -dyn.land_rate_mps if dh < 2.0 * dyn.accept_radius_m else 0.0
+    else:
+        t_h = dh / max(v_h, 0.5)
+        v_z = math.copysign(min(dyn.climb_rate_mps, abs(dz) / max(t_h, 1.0)), dz)
+    ux, uy = (dx / dh, dy / dh) if dh > 1e-9 else (0.0, 0.0)
+    return (v_h * ux, v_h * uy, v_z)
+
+
+def _follow(v: list[float], cmd: tuple[float, float, float], dyn: FlightDynamics) -> list[float]:
+    """One step of the first-order velocity loop towards ``cmd``, acceleration-limited."""
+    dt = dyn.dt_s
+    ax = (cmd[0] - v[0]) / dyn.response_s
+    ay = (cmd[1] - v[1]) / dyn.response_s
+    az = (cmd[2] - v[2]) / dyn.response_s
+    ah = math.hypot(ax, ay)
+    if ah > dyn.accel_max_mps2:
+        ax, ay = ax * dyn.accel_max_mps2 / ah, ay * dyn.accel_max_mps2 / ah
+    az = max(-dyn.vert_accel_max_mps2, min(dyn.vert_accel_max_mps2, az))
+    return [v[0] + ax * dt, v[1] + ay * dt, v[2] + az * dt]
+
+
+def _trajectory(
+    ts: list[float],
+    ps: list[tuple[float, float, float]],
+    vs: list[tuple[float, float, float]],
+    dt: float,
+    ground: float,
+    t_takeoff: float,
+    t_landed: float,
+) -> Trajectory:
+    """The integrated samples as a :class:`Trajectory` (never-reached events at the end)."""
+    tt = np.asarray(ts, dtype=float)
+    pos = np.asarray(ps, dtype=float)
+    vel = np.asarray(vs, dtype=float)
+    acc = np.gradient(vel, tt, axis=0) if tt.size > 1 else np.zeros_like(vel)
+    # the airframe's tilt follows the acceleration smoothed over ~0.5 s, not each gust step
+    width = max(1, round(0.5 / dt))
+    if tt.size > width:
+        kernel = np.ones(width) / width
+        acc = np.stack([np.convolve(acc[:, k], kernel, mode="same") for k in range(3)], axis=1)
+    if math.isnan(t_landed):
+        t_landed = float(tt[-1])
+    if math.isnan(t_takeoff):
+        t_takeoff = float(tt[-1])
+    return Trajectory(tt, pos, vel, acc, ground, t_takeoff, t_landed)
+
+
 def fly(
     plan: FlightPlan,
     site: Site,
@@ -347,45 +428,17 @@ def fly(
         if wi < len(targets) and t >= plan.hold_before_s:
             if math.isnan(t_takeoff):
                 t_takeoff = t
-            tx, ty, tz, sp = targets[wi]
+            tx, ty, tz, _ = targets[wi]
             dx, dy, dz = tx - p[0], ty - p[1], tz - p[2]
             dh = math.hypot(dx, dy)
             last = wi == len(targets) - 1
-            if last or holds[wi] > 0.0:
-                v_corner = 0.0
+            if math.isnan(hold_until):
+                stop = last or holds[wi] > 0.0
+                cmd = _leg_command(targets, wi, (dx, dy, dz), dh, stop, landing, dyn)
             else:
-                nx, ny = targets[wi + 1][0] - tx, targets[wi + 1][1] - ty
-                nh = math.hypot(nx, ny)
-                if nh < 1e-6 or dh < 1e-6:
-                    v_corner = dyn.corner_min_speed_mps
-                else:
-                    cosang = (dx * nx + dy * ny) / (dh * nh)
-                    half = 0.5 * math.acos(max(-1.0, min(1.0, cosang)))
-                    v_corner = max(dyn.corner_min_speed_mps, sp * math.cos(half) ** 2)
-                v_corner = min(v_corner, targets[wi + 1][3], sp)
-            brake = 0.6 * dyn.accel_max_mps2
-            v_h = min(sp, math.sqrt(v_corner**2 + 2.0 * brake * max(dh - dyn.accept_radius_m, 0.0)))
-            if last:
-                v_h = min(v_h, 0.8 * dh)
-            if last and landing:
-                # descend at the landing rate once over the spot (within 2 accept radii)
-                v_z = -dyn.land_rate_mps if dh < 2.0 * dyn.accept_radius_m else 0.0
-            else:
-                t_h = dh / max(v_h, 0.5)
-                v_z = math.copysign(min(dyn.climb_rate_mps, abs(dz) / max(t_h, 1.0)), dz)
-            ux, uy = (dx / dh, dy / dh) if dh > 1e-9 else (0.0, 0.0)
-            cmd = (v_h * ux, v_h * uy, v_z)
-            if not math.isnan(hold_until):
                 # position hold over the waypoint: a gentle pull back to the spot
                 cmd = (0.2 * dx, 0.2 * dy, 0.5 * dz)
-            ax = (cmd[0] - v[0]) / dyn.response_s
-            ay = (cmd[1] - v[1]) / dyn.response_s
-            az = (cmd[2] - v[2]) / dyn.response_s
-            ah = math.hypot(ax, ay)
-            if ah > dyn.accel_max_mps2:
-                ax, ay = ax * dyn.accel_max_mps2 / ah, ay * dyn.accel_max_mps2 / ah
-            az = max(-dyn.vert_accel_max_mps2, min(dyn.vert_accel_max_mps2, az))
-            v = [v[0] + ax * dt, v[1] + ay * dt, v[2] + az * dt]
+            v = _follow(v, cmd, dyn)
             reached = math.sqrt(dh * dh + dz * dz) < (
                 0.25 if (last and landing) else dyn.accept_radius_m
             )
@@ -427,17 +480,4 @@ def fly(
                 f"{plan.source or plan.name}: flight did not finish within 6 h "
                 f"(stuck before waypoint {wi + 1})"
             )
-    tt = np.asarray(ts, dtype=float)
-    pos = np.asarray(ps, dtype=float)
-    vel = np.asarray(vs, dtype=float)
-    acc = np.gradient(vel, tt, axis=0) if tt.size > 1 else np.zeros_like(vel)
-    # the airframe's tilt follows the acceleration smoothed over ~0.5 s, not each gust step
-    width = max(1, round(0.5 / dt))
-    if tt.size > width:
-        kernel = np.ones(width) / width
-        acc = np.stack([np.convolve(acc[:, k], kernel, mode="same") for k in range(3)], axis=1)
-    if math.isnan(t_landed):
-        t_landed = float(tt[-1])
-    if math.isnan(t_takeoff):
-        t_takeoff = float(tt[-1])
-    return Trajectory(tt, pos, vel, acc, ground, t_takeoff, t_landed)
+    return _trajectory(ts, ps, vs, dt, ground, t_takeoff, t_landed)

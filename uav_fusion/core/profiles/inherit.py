@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.schema import BY_PATH, SECTIONS, belongs
+from uav_fusion.core.profiles.schema import BY_PATH, SECTIONS, belongs
 from uav_fusion.core.yamlio import read_yaml_file
 from uav_fusion.resources import config_path
 

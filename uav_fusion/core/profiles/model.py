@@ -22,12 +22,18 @@ import numpy.typing as npt
 
 from uav_fusion.core.data.uav_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators.components import validate_transition
-from uav_fusion.core.estimators.inherit import profile_path, resolve
-from uav_fusion.core.estimators.keys import MULTI, PAPER, TRACKER, Key, check, convert
-from uav_fusion.core.estimators.multi_settings import MultiSettings
-from uav_fusion.core.estimators.objects import ScoreConfig
-from uav_fusion.core.estimators.schema import BY_PATH, KEYS, find
+from uav_fusion.core.profiles.checks import (
+    MULTI,
+    PAPER,
+    TRACKER,
+    Key,
+    check,
+    convert,
+    validate_transition,
+)
+from uav_fusion.core.profiles.inherit import profile_path, resolve
+from uav_fusion.core.profiles.schema import BY_PATH, KEYS, find
+from uav_fusion.core.profiles.settings import MultiSettings, ScoreConfig
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.yamlio import read_yaml_file
 
@@ -121,7 +127,7 @@ class Profile:
     def with_keys(self, values: Mapping[str, Any]) -> Profile:
         """A copy with some keys set by their YAML path (``gating.nis_probability``,
         ``association.class.tau_s``, ``multi.merge_s``), each value as
-        :func:`~uav_fusion.core.estimators.keys.convert` gives it (validated again)."""
+        :func:`~uav_fusion.core.profiles.checks.convert` gives it (validated again)."""
         changes: dict[str, Any] = {}
         parts: dict[str, dict[str, Any]] = {"score": {}, "multi": {}}
         for path, value in values.items():
@@ -193,7 +199,7 @@ def default_of(key: Key) -> Any:
 
 def profile_from_dict(doc: Any, source: Path | None = None) -> Profile:
     """Build and validate a :class:`Profile` from a parsed YAML document (merged over the
-    profiles it extends, :mod:`~uav_fusion.core.estimators.inherit`)."""
+    profiles it extends, :mod:`~uav_fusion.core.profiles.inherit`)."""
     res = resolve(doc, source)
     return _build(res.doc, source, res.origin)
 

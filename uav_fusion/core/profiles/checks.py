@@ -1,6 +1,6 @@
 """What a profile key is (:class:`Key`) and what its values may be: the type, bounds and
 choice checks the profile loader applies to every key of the schema
-(:mod:`~uav_fusion.core.estimators.schema`)."""
+(:mod:`~uav_fusion.core.profiles.schema`)."""
 
 from __future__ import annotations
 
@@ -225,3 +225,24 @@ def _check_matrix(key: Key, R: Any, where: str) -> None:
         raise ConfigError(f"{w}: must be symmetric")
     if np.min(np.linalg.eigvalsh(a)) <= 0:
         raise ConfigError(f"{w}: must be positive definite")
+
+
+def validate_transition(m: object, n_modes: int, where: str) -> tuple[tuple[float, ...], ...]:
+    """A Markov transition matrix: ``n_modes`` x ``n_modes``, entries in [0, 1], rows summing
+    to 1 (within 1e-9). Raises ValueError naming ``where`` and the fault."""
+    try:
+        a = np.asarray(m, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: must be a {n_modes}x{n_modes} matrix of numbers") from None
+    if a.shape != (n_modes, n_modes):
+        raise ValueError(f"{where}: must be {n_modes}x{n_modes} (one row per mode), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{where}: entries must be finite")
+    if np.any(a < 0) or np.any(a > 1):
+        raise ValueError(f"{where}: entries must lie in [0, 1]")
+    sums = a.sum(axis=1)
+    bad = np.flatnonzero(np.abs(sums - 1.0) > 1e-9)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"{where}: row {i} sums to {sums[i]:.12g}, not 1")
+    return tuple(tuple(float(v) for v in row) for row in a)

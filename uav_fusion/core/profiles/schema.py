@@ -1,12 +1,12 @@
 """Every key of an estimator profile, documented once: its YAML path, type, bounds or choices,
 unit, meaning and basis.
 
-The loader (:mod:`~uav_fusion.core.estimators.profile`) reads and checks a profile with this
+The loader (:mod:`~uav_fusion.core.profiles.model`) reads and checks a profile with this
 table, ``config/profiles/README.md`` is generated from it (``uav_fusion profile doc``), and a
 sweep's parameters are its paths. Defaults are not written here: they are those of the
-dataclasses the keys land in (:class:`~uav_fusion.core.estimators.profile.Profile`,
+dataclasses the keys land in (:class:`~uav_fusion.core.profiles.model.Profile`,
 :class:`~uav_fusion.core.estimators.objects.ScoreConfig` for ``association.*`` and
-:class:`~uav_fusion.core.estimators.multi_settings.MultiSettings` for ``multi.*``).
+:class:`~uav_fusion.core.profiles.settings.MultiSettings` for ``multi.*``).
 
 A key's *basis* says where its value comes from: ``spec`` (a sensor's specification),
 ``physical`` (a physical limit), ``fitted`` (fitted on flights, by the command named in
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from uav_fusion.core.estimators.keys import (
+from uav_fusion.core.profiles.checks import (
     ALL,
     BOOL,
     CHOICE,

@@ -1,6 +1,7 @@
-"""Motion filters of the tracker: one CV model, or an IMM of CV models with different ``q``.
+"""An IMM of CV models with different ``q``: the tracker's alternative motion filter
+(``motion.model: imm``; the CV model is :class:`~uav_fusion.core.estimators.kalman.CvFilter`).
 
-Both keep their modes in :class:`~uav_fusion.core.estimators.kalman.CvKalman` (the paper's
+Its modes are kept in :class:`~uav_fusion.core.estimators.kalman.CvKalman` (the paper's
 hand-unrolled kernels), so a prediction or an update costs a few microseconds; the IMM's
 mixing and combination are written on the packed lists (6 state values, 21 covariance
 values) in plain Python.
@@ -24,66 +25,25 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-from uav_fusion.core.estimators.kalman import UPPER_INDEX, CvKalman, PackedR, expand_upper
+from uav_fusion.core.estimators.kalman import (
+    _PAIRS,
+    Q3,
+    CvKalman,
+    PackedR,
+    _nis,
+    _update,
+    expand_upper,
+    update_linear,
+    update_scalar,
+)
 
 FloatArray = npt.NDArray[np.float64]
 
-Q3 = tuple[float, float, float]
-_PAIRS = tuple((i, j) for i in range(6) for j in range(i, 6))
-_PI = tuple(i for i, _ in _PAIRS)
-_PJ = tuple(j for _, j in _PAIRS)
-_UNIT = tuple(tuple(1.0 if i == k else 0.0 for i in range(6)) for k in range(6))
 _LOG2PI = math.log(2.0 * math.pi)
-
-
-class MotionFilter(Protocol):
-    """What the tracker needs from a motion filter (CV or IMM)."""
-
-    def set_state(self, x: FloatArray | Sequence[float], P: FloatArray) -> None: ...
-    def predict(self, T: float) -> None: ...
-    def nis(self, z: Sequence[float], r: PackedR) -> float: ...
-    def update(self, z: Sequence[float], r: PackedR) -> float: ...
-    def mean(self) -> tuple[list[float], list[float]]: ...
-    def copy(self) -> MotionFilter: ...
-    def mode_probabilities(self) -> tuple[float, ...]: ...
-    def effective_q(self) -> Q3: ...
-    def update_scalar(self, idx: int, value: float, var: float) -> None: ...
-    def update_linear(self, h: Sequence[float], value: float, var: float) -> None: ...
-
-
-def _nis(kf: CvKalman, z: Sequence[float], r: PackedR) -> float:
-    if len(z) == 3:
-        return kf.nis3(z[0], z[1], z[2], r)
-    return kf.nis2(z[0], z[1], r)
-
-
-def _update(kf: CvKalman, z: Sequence[float], r: PackedR) -> float:
-    if len(z) == 3:
-        return kf.update3(z[0], z[1], z[2], r)
-    return kf.update2(z[0], z[1], r)
-
-
-def update_scalar(kf: CvKalman, idx: int, value: float, var: float) -> None:
-    """Update with a scalar pseudo-measurement of state element ``idx`` (variance ``var``):
-    :func:`update_linear` with ``h = e_idx`` (``K = P e_i / (P_ii + var)``)."""
-    update_linear(kf, _UNIT[idx], value, var)
-
-
-def update_linear(kf: CvKalman, h: Sequence[float], value: float, var: float) -> None:
-    """Update with a scalar pseudo-measurement ``h . x`` (``h`` over the 6 state elements,
-    variance ``var``): ``K = P h / (h^T P h + var)``, ``x += K (value - h . x)``,
-    ``P -= K K^T (h^T P h + var)``."""
-    p = kf.P
-    col = [sum(p[UPPER_INDEX[a][b]] * h[b] for b in range(6) if h[b]) for a in range(6)]
-    s = sum(h[a] * col[a] for a in range(6)) + var
-    y = value - sum(h[a] * kf.x[a] for a in range(6))
-    kf.x = [xa + ca * y / s for xa, ca in zip(kf.x, col, strict=True)]
-    kf.P = [pv - col[i] * col[j] / s for pv, i, j in zip(p, _PI, _PJ, strict=True)]
 
 
 def innovation_logdet(p: Sequence[float], r: PackedR) -> float:
@@ -105,48 +65,6 @@ def innovation_logdet(p: Sequence[float], r: PackedR) -> float:
         + s02 * (s01 * s12 - s02 * s11)
     )
     return math.log(det)
-
-
-class CvFilter:
-    """One constant-velocity model (the paper's filter as a :class:`MotionFilter`)."""
-
-    __slots__ = ("kf",)
-
-    def __init__(self, q: Q3) -> None:
-        self.kf = CvKalman(q)
-
-    def set_state(self, x: FloatArray | Sequence[float], P: FloatArray) -> None:
-        self.kf.set_state(x, P)
-
-    def predict(self, T: float) -> None:
-        self.kf.predict(T)
-
-    def nis(self, z: Sequence[float], r: PackedR) -> float:
-        return _nis(self.kf, z, r)
-
-    def update(self, z: Sequence[float], r: PackedR) -> float:
-        return _update(self.kf, z, r)
-
-    def mean(self) -> tuple[list[float], list[float]]:
-        return self.kf.x, self.kf.P
-
-    def copy(self) -> CvFilter:
-        c = CvFilter(self.kf.q)
-        c.kf.x = list(self.kf.x)
-        c.kf.P = list(self.kf.P)
-        return c
-
-    def mode_probabilities(self) -> tuple[float, ...]:
-        return (1.0,)
-
-    def update_scalar(self, idx: int, value: float, var: float) -> None:
-        update_scalar(self.kf, idx, value, var)
-
-    def update_linear(self, h: Sequence[float], value: float, var: float) -> None:
-        update_linear(self.kf, h, value, var)
-
-    def effective_q(self) -> Q3:
-        return self.kf.q
 
 
 def outer_diff(xa: Sequence[float], xb: Sequence[float]) -> list[float]:
@@ -310,14 +228,3 @@ class ImmFilter:
 def packed_arrays(x: Sequence[float], p: Sequence[float]) -> tuple[FloatArray, FloatArray]:
     """(x (6,), P (6, 6)) arrays from packed lists."""
     return np.array(x, dtype=float), expand_upper(p)
-
-
-__all__ = [
-    "UPPER_INDEX",
-    "CvFilter",
-    "ImmFilter",
-    "MotionFilter",
-    "combine",
-    "innovation_logdet",
-    "packed_arrays",
-]

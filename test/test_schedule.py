@@ -1,0 +1,105 @@
+"""Arrival schedules (uav_fusion.core.live.schedule) and ``uav_fusion run`` in live arrival
+order: the offline run of a schedule reproduces the zero-wait pipeline, bad input is named."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import pytest
+
+from uav_fusion.cli import main
+from uav_fusion.core.data import load_flight
+from uav_fusion.core.errors import ConfigError, DataError
+from uav_fusion.core.estimators import load_profile, make_estimator
+from uav_fusion.core.live.rewind import simulate
+from uav_fusion.core.live.schedule import delayed, parse_delay, read_schedule, write_schedule
+from uav_fusion.core.records import RADAR, RF
+from uav_fusion.core.site import load_site
+from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+
+
+@pytest.fixture(scope="module")
+def items():  # type: ignore[no-untyped-def]
+    site = load_site(None)
+    flight = load_flight(data_path(DEFAULT_FLIGHT), site)
+    est = make_estimator(load_profile("tracker"), site, live=True)
+    return [it for it in est.flight_input(flight) if it.t < flight.radar[0].t + 200.0]
+
+
+def test_parse_delay_reads_mean_and_jitter_and_names_bad_ones() -> None:
+    assert parse_delay("rf=3+-1") == (RF, 3.0, 1.0)
+    assert parse_delay("radar=0.25") == (RADAR, 0.25, 0.0)
+    for bad in ("rf=x", "lidar=1", "rf=-1", "rf=1+-nan"):
+        with pytest.raises(ConfigError, match="--delay"):
+            parse_delay(bad)
+
+
+def test_delayed_keeps_each_source_in_its_order_and_reorders_across(items) -> None:  # type: ignore[no-untyped-def]
+    arr = delayed(items, {RF: (3.0, 1.0)}, seed=4)
+    assert sorted(id(it) for _, it in arr) == sorted(id(it) for it in items)
+    for src in (RADAR, RF):
+        ts = [it.t for s, it in arr if s == src]
+        assert ts == sorted(ts)
+    assert [it for _, it in arr] != items
+
+
+def test_a_written_schedule_reads_back_in_arrival_order(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    arr = delayed(items, {RF: (2.0, 0.5)}, seed=1)
+    rows = [(src, it.t, n * 0.1) for n, (src, it) in enumerate(arr)]
+    path = write_schedule(tmp_path / "arrivals.csv", reversed(rows))  # file order does not count
+    back = read_schedule(path, items)
+    assert [id(it) for _, it in back] == [id(it) for _, it in arr]
+
+
+def test_schedule_errors_name_the_file_and_line(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    p = tmp_path / "s.csv"
+    p.write_text("source,stamp,arrival\nrf,1.5,2.0\n", encoding="utf-8")
+    with pytest.raises(DataError, match=r"s\.csv.*2.*no rf input"):
+        read_schedule(p, items)
+    p.write_text("src,t\n", encoding="utf-8")
+    with pytest.raises(DataError, match="header"):
+        read_schedule(p, items)
+    p.write_text(f"source,stamp,arrival\nradar,{items[0].t!r},abc\n", encoding="utf-8")
+    with pytest.raises(DataError, match="numbers"):
+        read_schedule(p, items)
+
+
+def test_run_with_delays_reports_an_exact_final_track_and_what_was_published(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pub = tmp_path / "published.csv"
+    assert main(["run", "--profile", "tracker", "--delay", "rf=3+-1", "--seed", "2",
+                 "--published", str(pub), "--out", str(tmp_path / "steps.csv")]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "rewinds" in out and "the final track equals the in-order run" in out
+    with pub.open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["topic"] for r in rows} == {"steps", "grid"}
+    arrivals = [int(r["arrival"]) for r in rows]
+    assert arrivals == sorted(arrivals)
+    assert all(math.isfinite(float(r["x"])) for r in rows if r["topic"] == "grid")
+
+
+def test_run_rejects_a_bad_delay(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", "--profile", "tracker", "--delay", "rf=soon"]) == 2
+    assert "--delay 'rf=soon'" in capsys.readouterr().err
+
+
+def test_simulated_schedule_equals_feeding_a_pipeline_message_by_message(items) -> None:  # type: ignore[no-untyped-def]
+    from uav_fusion.core.live.pipeline import Pipeline, PipelineConfig
+    from uav_fusion.core.records import RadarFrame
+
+    site = load_site(None)
+    prof = load_profile("tracker")
+    arr = delayed(items, {RF: (3.0, 1.0)}, seed=9)
+    outs, _, _ = simulate(lambda: make_estimator(prof, site, 10.0, live=True), arr)
+    pipe = Pipeline(make_estimator(prof, site, 10.0, live=True), PipelineConfig())
+    got = []
+    for _src, it in arr:
+        got.append(pipe.radar(it) if isinstance(it, RadarFrame) else pipe.rf([it]))
+    got.append(pipe.flush())
+    key = [(s.t, s.status, repr(s.values)) for o in outs for s in o.steps]
+    assert key == [(s.t, s.status, repr(s.values)) for o in got for s in o.steps]
+    assert [g.k for o in outs for g in o.grid] == [g.k for o in got for g in o.grid]

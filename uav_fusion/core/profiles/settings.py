@@ -1,0 +1,102 @@
+"""The trackers' setting groups: the UAV score of every radar object (:class:`ScoreConfig`, a
+profile's ``association`` groups) and the multi-UAV tracker's own settings
+(:class:`MultiSettings`, the ``multi`` section).
+
+Plain dataclasses, so that the profile loader builds them without importing the trackers.
+Every key is optional; an absent key keeps the default below (the values the benchmark
+figures were measured with). Each key's meaning, type and bounds are in the profile schema
+(:mod:`~uav_fusion.core.profiles.schema`; ``config/profiles/README.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class MultiSettings:
+    """What the multi-UAV tracker adds to a tracker profile."""
+
+    merge_nis: float = 3.0  # two tracks this close (NIS, 3 dof) are candidates for a merge
+    merge_s: float = 3.0  # ... and are merged after this long
+    emitter_doubt: float = 0.1  # 1 - P(UAV) is multiplied by this for a track with an emitter
+    birth_age_s: float | None = None  # None: the score's stationary_min_age_s
+    continuity_bonus: float = 0.0  # NIS credit for the radar object a track took last
+    velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
+    velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
+    output_coast_s: float | None = 3.0  # published while the last update is this recent
+    radar_output_s: float | None = 3.0  # inside radar cover: ... and the last radar update
+    emitter_misses: int | None = 3  # this many fixes of its emitter in a row outside a
+    # track's gate unlink the emitter from it (None: never)
+    tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
+    merge_keeps_live: bool = True  # a merge keeps the recently updated track over the older
+    flat_below_ground: bool = True  # a report below the ground updates east / north only
+    birth_sep_m: float | None = 60.0  # a strong object inside a track's gate starts a track
+    # when that track took another report of the frame this far away (None: never)
+    early_birth_age_s: float | None = 4.0  # an object moving at early_birth_speed_mps or
+    early_birth_speed_mps: float = 3.0  # more (mean speed) may start a track from this age
+    # (None: only from birth_age_s, or with RF support)
+    class_by_age: bool = True  # the profile's class_prior_logit reading of young radar
+    # tracks (False: each report's class as it is)
+    class_range_scale_m: float | None = 3000.0  # with class_by_age, a radar track younger
+    class_range_age_s: float = 8.0  # than this has its class read for its range too (None: off)
+    emitter_follow_min: float | None = 0.0  # an object scoring this much (below follow_min)
+    # that its emitter's fixes credit may update the track carrying that emitter (None: off)
+
+
+@dataclass(frozen=True)
+class ScoreConfig:
+    """Weights and thresholds of the UAV score: a profile's ``association`` groups (each key
+    and the field it sets: :mod:`~uav_fusion.core.profiles.schema`)."""
+
+    class_weight: float = 1.0
+    class_tau_s: float = 8.0
+    class_clip: float = 3.0
+    stationary_speed_mps: float = 1.5
+    stationary_min_age_s: float = 8.0
+    stationary_weight: float = 5.0
+    ground_alt_m: float = 4.0
+    ground_weight: float = 3.0
+    ground_release_sigmas: float = 0.0
+    vehicle_min_rcs_dbsm: float = -100.0  # -100: every low moving object may be a vehicle
+    below_ground_m: float = 5.0
+    below_ground_weight: float = 8.0
+    below_ground_sigmas: float = 0.0
+    erratic_nis: float = 6.0
+    bird_rcs_dbsm: float = -15.0
+    erratic_weight: float = 2.0
+    large_rcs_dbsm: float = 100.0  # 100: off
+    large_rcs_weight: float = 5.0
+    rf_weight: float = 1.0
+    rf_tau_s: float = 30.0
+    rf_max: float = 3.0
+    rf_window_s: float = 3.0
+    rf_support_max_cep_m: float = 0.0
+    rf_memory_s: float = 0.0
+    fused_weight: float = 1.5
+    fused_tau_s: float = 10.0
+    fused_nis: float = 3.0
+    lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
+    reach_margin_m: float = 0.0  # single-UAV tracker: 0: no reach gate (Tracker._reachable)
+    age_weight: float = 0.5
+    age_full_s: float = 10.0
+    object_q: float = 5.0
+    object_floor_m: float = 10.0
+    speed_tau_s: float = 5.0
+    follow_min: float = 0.0
+    init_min: float = 1.0
+    init_min_reports: int = 4
+    skip_radar_coasts: bool = False
+    rf_nearest_only: bool = False
+    challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
+    challenge_margin: float = 0.5
+    # a young radar track's class output leans to the classifier's prior (module text); None:
+    # every report's logit taken as it is
+    class_prior_logit: float | None = None
+    class_age_tau_s: float = 4.0
+    class_min_weight: float = 0.4
+    # ... and, while the object is younger than class_range_age_s, for its range: the weight is
+    # also multiplied by exp(-range / class_range_scale_m) (0: off). Not profile keys: the
+    # multi-UAV tracker sets them (MultiSettings); module text
+    class_range_scale_m: float = 0.0
+    class_range_age_s: float = 0.0
