@@ -25,16 +25,17 @@ Each run takes ``--wall-s`` wall seconds of flight (``rate`` x that many sensor 
 ``--via``, leaving out the radar lines of the last ``--trim-s`` sensor seconds (at the end of
 the input, a pipeline that waits for the RF stream releases them only at its idle flush: an
 effect of the input ending, not of the stream). ``--variant NAME:param=value,param=value``
-runs the fusion node with those parameters (repeatable; default ``reorder``: today's
-pipeline, ``reorder_window_s`` 2 s), so another pipeline is measured side by side with the
-same command. The fusion node runs with ``stall_timeout_s`` 0 (no prediction to the wall
-clock: the flight's stamps are from 2025) unless a variant sets it.
+runs the fusion node with those parameters (repeatable; default: ``zero-wait``,
+``reorder_window_s`` 0, every measurement fused as it arrives, and ``reorder``, the 2 s reorder
+window it replaced as the default), so the pipelines are measured side by side. The fusion
+node runs with ``stall_timeout_s`` 0 (no prediction to the wall clock: the flight's stamps are
+from 2025) unless a variant sets it.
 
 Usage::
 
     python scripts/bench_live.py                               # tcp + file, 1x and 10x
     python scripts/bench_live.py --rates 1 --via tcp --wall-s 30
-    python scripts/bench_live.py --variant reorder: --variant small:reorder_window_s=0.2
+    python scripts/bench_live.py --variant lag5:max_lag_s=5.0 --variant w02:reorder_window_s=0.2
 
 Sets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a random ROS_DOMAIN_ID in 101-232 unless
 given (test runs pick 1-100). Writes ``--out`` (default out/bench_live/results.json).
@@ -63,6 +64,8 @@ os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="uav_fusion_bench_l
 
 BIN = Path(sys.executable).parent
 LIMIT_S = 120.0
+#: zero wait (late data re-filtered) and the reorder window it replaced, side by side
+DEFAULT_VARIANTS = ("zero-wait:reorder_window_s=0.0", "reorder:reorder_window_s=2.0")
 
 
 @dataclass
@@ -334,10 +337,11 @@ def main() -> int:
     ap.add_argument("--quiet-s", type=float, default=4.0,
                     help="after the emulator: wait until no output for this long (default 4)")
     ap.add_argument("--variant", action="append", metavar="NAME:param=value,...",
-                    help="fusion_node parameters of one variant (default reorder:)")
+                    help="fusion_node parameters of one variant (default: "
+                    + " and ".join(DEFAULT_VARIANTS) + ")")
     ap.add_argument("--out", type=Path, default=Path("out/bench_live/results.json"))
     args = ap.parse_args()
-    variants = [parse_variant(v) for v in (args.variant or ["reorder:"])]
+    variants = [parse_variant(v) for v in (args.variant or list(DEFAULT_VARIANTS))]
     work = Path(tempfile.mkdtemp(prefix="bench_live_"))
     listener = Listener()
     results: list[RunResult] = []

@@ -8,15 +8,21 @@ a pace), with the per-source delays and jitter of ``--delay`` / ``--jitter``, ov
 and evaluator_node run as in the replayed graph (no ``/clock``: every node on the host
 clock), all in this process. The emulator runs in a thread of its own.
 
-The run is checked against the offline run of the same flight: the fusion node holds each
-measurement for its reorder window, which is widened by the largest delay + jitter, so it
-processes everything in the offline order, and the evaluator's table must equal the offline
-one. Two things a live stream cannot do as the offline run does: the paper profile's
-largest-track choice needs the whole flight (the live graph and its offline reference then
-use the ``online`` selection: every report of a frame is a candidate), and the raw radar row
+The run is checked against the offline run of the same flight. With zero wait (``--window``
+0, the default) the fusion node fuses every measurement as it arrives, a late one by
+re-filtering (``max_lag_s``: 10 s, or more: twice the largest delay + jitter, plus 1 s, plus
+one wall second of stall at the rate), and writes what arrived when to
+``<out>/arrivals.csv``; the offline run fuses the flight in that order (``uav_fusion run
+--arrivals``), and the evaluator's table must equal it. With a reorder
+window (``--window`` > 0) the window is widened by the largest delay + jitter, so the node
+processes everything in the offline order, and the table must equal the in-order run.
+
+Two things a live stream cannot do as the offline run does: the paper profile's
+largest-track choice needs the whole flight (the live graph and its offline reference then use
+the ``online`` selection: every report of a frame is a candidate), and the raw radar row
 classes a report by the mean UAV probability of its track *so far* (offline: of the whole
-track); that row is shown, not compared. The arrival schedule the emulator produced is written
-to ``<out>/arrivals.csv``.
+track); that row is shown, not compared. The emulator's own schedule (every line sent, when) is
+written to ``<out>/emulated.csv``.
 """
 
 from __future__ import annotations
@@ -30,13 +36,16 @@ from typing import Any
 
 #: the rows a live stream cannot reproduce exactly (see the module text)
 CAUSAL_ROWS = ("radar_raw",)
+#: the fusion node's arrival schedule (what arrived when), and the emulator's (what was sent)
+ARRIVALS = "arrivals.csv"
+EMULATED = "emulated.csv"
 
 
 def live_profile(profile: str, out: Path) -> str:
     """``profile``, or a profile that extends it with the ``online`` radar selection when it
     chooses the largest track (written into ``out``)."""
     from uav_fusion.core.estimators import load_profile
-    from uav_fusion.core.estimators.profile import profile_path
+    from uav_fusion.core.profiles import profile_path
 
     prof = load_profile(profile)
     if prof.radar_selection != "largest_track" or prof.uses_tracker:
@@ -103,10 +112,21 @@ class _LiveGraph:
         self.expected = {s: sum(1 for x in self.sends if x.source == s and x.sensor_t is not None)
                          for s in lines}
         lag = max((delay.get(s, 0.0) + jitter.get(s, 0.0) for s in lines), default=0.0)
-        self.window = float(args.window) + lag
-        fusion_ov = {**self.ov["fusion_node"], "profile": self.profile,
-                     "reorder_window_s": self.window, "use_sim_time": False,
+        fusion_ov = {**self.ov["fusion_node"], "profile": self.profile, "use_sim_time": False,
                      "stall_timeout_s": 0.0}
+        if float(args.window) > 0:
+            # the reorder window, widened by the lateness: everything in the offline order
+            self.window = float(args.window) + lag
+            fusion_ov.update({"reorder_window_s": self.window, "arrivals_file": ""})
+            self.arrivals: Path | None = None
+        else:
+            # zero wait: late data re-filtered; the node writes what arrived when
+            self.window = 0.0
+            # sensor seconds: the lateness, and 1 s of wall-clock stall at this rate
+            self.max_lag = max(10.0, 2.0 * lag + 1.0 + self.rate)
+            self.arrivals = self.out / ARRIVALS
+            fusion_ov.update({"reorder_window_s": 0.0, "max_lag_s": self.max_lag,
+                              "arrivals_file": str(self.arrivals)})
         eval_ov = {**self.ov["evaluator_node"], "use_sim_time": False}
         if load_profile(self.profile).uses_tracker:
             eval_ov["grid_topic"] = "fusion/odom"
@@ -239,11 +259,13 @@ def run_live(args: argparse.Namespace, flight_dir: Path, out: Path,
     try:
         graph.build(ctx)
         delays = ", ".join(args.delay or []) or "none"
+        mode = (f"reorder window {graph.window:g} s" if graph.window > 0
+                else f"zero wait, max_lag_s {graph.max_lag:g}")
         print(
             f"demo: live: emulating {flight_dir} at {graph.rate:g}x over {args.live_via} "
             f"(delays {delays}; jitter {', '.join(args.jitter or []) or 'none'}; seed "
             f"{args.seed}) -> radar_stream, rf_stream, truth_stream -> fusion_node (profile "
-            f"{Path(profile).stem}, reorder window {graph.window:g} s) -> evaluator_node",
+            f"{Path(profile).stem}, {mode}) -> evaluator_node",
             flush=True,
         )
         t0 = time.monotonic()
@@ -252,9 +274,10 @@ def run_live(args: argparse.Namespace, flight_dir: Path, out: Path,
         if graph.error is not None:
             print(f"demo: emulator failed: {graph.error}", file=sys.stderr)
             return 1
-        sched = out / "arrivals.csv"
+        sched = out / EMULATED
         out.mkdir(parents=True, exist_ok=True)
         write_schedule(sched, graph.emulator.rows)
+        arrivals = graph.arrivals
         if not ok:
             got = {s: n.ingest.monitor.records for s, n in graph.streams.items()}
             print(f"demo: live: not every line made it through (records {got}, expected "
@@ -280,16 +303,19 @@ def run_live(args: argparse.Namespace, flight_dir: Path, out: Path,
           f"ms; line-to-publish {lat_text}; {steps} filter steps; stream drops: "
           f"{ {s: d for s, d in per_stream.items() if d} or 'none'}; fusion drops: "
           f"{fdrop or 'none'}")
-    print(f"demo: report written to {files.folder}; arrival schedule {sched}")
+    print(f"demo: report written to {files.folder}; the emulator's schedule {sched}"
+          + ("" if arrivals is None else f", the fusion node's arrival schedule {arrivals}"))
     if args.no_check:
         return 0
-    return compare_offline(args, flight_dir, profile, live)
+    return compare_offline(args, flight_dir, profile, live, arrivals)
 
 
-def compare_offline(args: argparse.Namespace, flight_dir: Path, profile: str, live: Any) -> int:
-    """Score the flight offline with ``profile``; 0 when every row but the causal ones is
-    equal (counts exactly, mean and max to 1e-9 m; the rows counted over the raw radar
-    reports compare their counts, not that denominator)."""
+def compare_offline(args: argparse.Namespace, flight_dir: Path, profile: str, live: Any,
+                    arrivals: Path | None = None) -> int:
+    """Score the flight offline with ``profile`` (in the fusion node's arrival order when it
+    wrote one: zero wait); 0 when every row but the causal ones is equal (counts exactly, mean
+    and max to 1e-9 m; the rows counted over the raw radar reports compare their counts, not
+    that denominator)."""
     from uav_fusion.commands.evaluate import evaluate_flight
     from uav_fusion.core.data import load_flight
     from uav_fusion.core.site import load_site
@@ -297,7 +323,9 @@ def compare_offline(args: argparse.Namespace, flight_dir: Path, profile: str, li
     t0 = time.perf_counter()
     site = load_site(args.site)
     flight = load_flight(flight_dir, site)
-    ref, _ = evaluate_flight(flight, profile, site)
+    if arrivals is not None:
+        arrivals = _one_row_per_frame(arrivals)
+    ref, _ = evaluate_flight(flight, profile, site, arrivals=arrivals)
     same = True
     worst = 0.0
     for a, b in zip(live.rows, ref.rows, strict=True):
@@ -315,11 +343,36 @@ def compare_offline(args: argparse.Namespace, flight_dir: Path, profile: str, li
         elif a.stats.count:
             worst = max(worst, abs(a.stats.mean - b.stats.mean), abs(a.stats.max - b.stats.max))
     name = Path(profile).stem
+    order = "" if arrivals is None else " in the node's arrival order"
     if same and worst <= 1e-9:
-        print(f"demo: live: profile {name}: the live table equals the offline run's in every "
-              f"row but {', '.join(CAUSAL_ROWS)} (largest difference {worst:.1e} m; offline "
-              f"check {time.perf_counter() - t0:.1f} s)")
+        print(f"demo: live: profile {name}: the live table equals the offline run's{order} in "
+              f"every row but {', '.join(CAUSAL_ROWS)} (largest difference {worst:.1e} m; "
+              f"offline check {time.perf_counter() - t0:.1f} s)")
         return 0
     print(f"demo: live: profile {name}: live and offline differ (largest difference in "
           f"mean/max {worst:.3g} m)", file=sys.stderr)
     return 1
+
+
+def _one_row_per_frame(path: Path) -> Path:
+    """The node's arrival schedule with one row per radar frame: the paper's input
+    (``radar/pose``) brings a frame's candidates as one message each, and the node logs each
+    (the offline schedule reader takes one row per frame). The first row of a stamp is kept."""
+    import csv
+
+    with path.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    seen: set[str] = set()
+    kept = rows[:1]
+    for row in rows[1:]:
+        if row and row[0] == "radar":
+            if row[1] in seen:
+                continue
+            seen.add(row[1])
+        kept.append(row)
+    if len(kept) == len(rows):
+        return path
+    out = path.with_name(path.stem + "_frames.csv")
+    with out.open("w", newline="", encoding="utf-8") as fh:
+        csv.writer(fh).writerows(kept)
+    return out
