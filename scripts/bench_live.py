@@ -235,6 +235,7 @@ def one_run(listener: Listener, args: argparse.Namespace, via: str, rate: float,
                      "--sources", "radar,rf", "--start", f"{args.start_s:g}", "--duration",
                      f"{sensor_s:g}", "--schedule", str(sched), "--wait", "60", *emu_out],
                     run_dir / "emulate.log")
+        procs.append(emu)
         if emu.wait(timeout=args.wall_s * 3 + LIMIT_S) != 0:
             raise RuntimeError(f"the emulator failed: {(run_dir / 'emulate.log').read_text()}")
         # the last steps: released by the pipeline (at the latest its idle flush), then quiet

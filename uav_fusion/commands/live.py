@@ -13,9 +13,10 @@ The run is checked against the offline run of the same flight. With zero wait (`
 re-filtering (``max_lag_s``: 10 s, or more: twice the largest delay + jitter, plus 1 s, plus
 one wall second of stall at the rate), and writes what arrived when to
 ``<out>/arrivals.csv``; the offline run fuses the flight in that order (``uav_fusion run
---arrivals``), and the evaluator's table must equal it. With a reorder
-window (``--window`` > 0) the window is widened by the largest delay + jitter, so the node
-processes everything in the offline order, and the table must equal the in-order run.
+--arrivals``), and the evaluator's table must equal it. With a reorder window (``--window`` >
+0) the window is widened by the largest delay + jitter and one wall second of stall at the
+rate, so the node processes everything in the offline order, and the table must equal the
+in-order run.
 
 Two things a live stream cannot do as the offline run does: the paper profile's
 largest-track choice needs the whole flight (the live graph and its offline reference then use
@@ -115,8 +116,9 @@ class _LiveGraph:
         fusion_ov = {**self.ov["fusion_node"], "profile": self.profile, "use_sim_time": False,
                      "stall_timeout_s": 0.0}
         if float(args.window) > 0:
-            # the reorder window, widened by the lateness: everything in the offline order
-            self.window = float(args.window) + lag
+            # the reorder window, widened by the lateness and one wall second of stall at the
+            # rate: everything in the offline order
+            self.window = float(args.window) + lag + self.rate
             fusion_ov.update({"reorder_window_s": self.window, "arrivals_file": ""})
             self.arrivals: Path | None = None
         else:
