@@ -24,7 +24,7 @@ frame, or one RF fix):
 * radar reports as 3D position detections, each with its own ``LinearGaussian`` measurement
   model whose R is the profile's polar radar model at the report's position (the R our tracker
   updates with), after the profile's misalignment correction
-  (``measurement.radar.az_bias_deg`` / ``el_bias_deg``: the corrected reports ours takes);
+  (the site file's calibration: the corrected reports ours takes);
   RF fixes as 2D (east, north) detections with R from the CEP model. Reports
   beyond the range gate (the profile's ``far_gate_m`` when it has one: ours updates in 3D
   only out to ``range_gate_m`` and horizontally out to ``far_gate_m``, and this baseline has
@@ -115,7 +115,7 @@ from uav_fusion.core.estimators import Profile, load_profile
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
 from uav_fusion.core.estimators.parts import (
-    alignment_from_profile,
+    alignment_from_site,
     packed_to_array,
     radar_model_from_profile,
     rf_model_from_profile,
@@ -224,7 +224,7 @@ class Baseline:
     def __post_init__(self) -> None:
         p = self.profile
         self.radar_r = radar_model_from_profile(p, self.site)
-        self.align = alignment_from_profile(p, self.site)
+        self.align = alignment_from_site(self.site)
         self.rf_r = rf_model_from_profile(p)
         gate = p.range_gate_m if p.range_gate_m is not None else self.site.radar.range_gate_m
         if p.far_gate_m is not None:  # no horizontal-only mode here: 3D out to the far gate

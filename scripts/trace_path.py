@@ -80,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frame", type=int, default=1200, help="index of the traced radar frame")
     ap.add_argument("--profile", default="tracker")
-    ap.add_argument("--window", type=float, default=2.0, help="reorder_window_s")
+    ap.add_argument("--window", type=float, default=0.0,
+                    help="reorder_window_s (default 0: zero wait)")
     args = ap.parse_args(argv)
     site = load_site(None)
     flight = load_flight(data_path(DEFAULT_FLIGHT), site)
@@ -114,12 +115,19 @@ def main(argv: list[str] | None = None) -> int:
         ex.add_node(fusion)
         ex.add_node(io)
         taken = [0]
+        current: list[Recorder | None] = [None]  # the recorder of the traced callback
         for sub in list(fusion.subscriptions):
             inner: Callable[[Any], None] = sub.callback
 
             def counted(msg: Any, inner: Callable[[Any], None] = inner) -> None:
                 taken[0] += 1
-                inner(msg)
+                rec = current[0]
+                if rec is not None:  # trace this subscription callback only
+                    sys.setprofile(rec)
+                try:
+                    inner(msg)
+                finally:
+                    sys.setprofile(None)
 
             sub.callback = counted
 
@@ -143,16 +151,13 @@ def main(argv: list[str] | None = None) -> int:
 
             (pub_radar if kind == 0 else pub_rf).publish(msg)
             rec = Recorder()
-            if i >= target:
-                sys.setprofile(rec)
-            try:
-                spin_until(took)
-                # the fusion node's outputs reach the subscriber in the next spins
-                end = time.monotonic() + 0.05
-                while time.monotonic() < end:
-                    ex.spin_once(timeout_sec=0.005)
-            finally:
-                sys.setprofile(None)
+            current[0] = rec if i >= target else None
+            spin_until(took)
+            current[0] = None
+            # the fusion node's outputs reach the subscriber in the next spins
+            end = time.monotonic() + 0.05
+            while time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.005)
             if i == target:
                 spins.append((i, rec))
             elif i > target and any(t >= t_frame for t in odom[n_odom:]):

@@ -4,6 +4,7 @@ statistics are computed as documented."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +12,8 @@ import pytest
 from uav_fusion.cli import main as cli_main
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.data.uav_class import uav_track_ids
+from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.scoring.calibration import (
     angle_residuals,
@@ -190,6 +193,24 @@ def test_calibrate_command_prints_the_tables(capsys: pytest.CaptureFixture[str])
     assert "median truth north coordinate" in out
     # the default flight's twin radar is mounted 0.5 deg off in azimuth (docs/twin.md)
     assert "Radar alignment (median UAV report minus truth" in out
+
+
+def test_calibrate_command_writes_the_site_file_the_trackers_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "calibrated.yaml"
+    assert cli_main(["calibrate", str(data_path(DEFAULT_FLIGHT)), "--write-site", str(out)]) == 0
+    text = capsys.readouterr().out
+    cal = load_site(out).radar.calibration
+    # the bundled flight's twin radar is mounted 0.5 deg off in azimuth, 0.3 in elevation; the
+    # flight measures them to within a few tenths and says so (0.62 +- 0.13, 0.08 +- 0.15)
+    assert 0.0 < cal.az_sigma_deg < 0.3 and 0.0 < cal.el_sigma_deg < 0.3
+    assert abs(cal.az_bias_deg - 0.5) < 2.5 * cal.az_sigma_deg
+    assert abs(cal.el_bias_deg - 0.3) < 2.5 * cal.el_sigma_deg
+    assert "calibrate over 1 flight(s)" in cal.note
+    assert f"{cal.az_bias_deg:+.3f}" in text and str(out) in text
+    site = load_site(out)
+    assert Tracker(load_profile("tracker"), site).front.align is not None
 
 
 def test_calibrate_command_rejects_a_missing_folder(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]

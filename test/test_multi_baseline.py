@@ -15,16 +15,17 @@ from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import cv_process_noise
 from uav_fusion.core.estimators.parts import (
-    alignment_from_profile,
+    alignment_from_site,
     packed_to_array,
     radar_model_from_profile,
     rf_model_from_profile,
 )
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
-from uav_fusion.core.site import Site, load_site
+from uav_fusion.core.site import RadarCalibration, Site, load_site
 
 pytest.importorskip("stonesoup")
+
 
 @pytest.fixture(scope="module")
 def mb() -> ModuleType:
@@ -70,6 +71,7 @@ def test_gate_is_the_nis_gate(mb: ModuleType, profile: Profile, site: Site) -> N
 def test_detections_carry_our_r_and_the_same_drops(
     mb: ModuleType, profile: Profile, site: Site
 ) -> None:
+    site = site.calibrated(RadarCalibration(az_bias_deg=0.45, el_bias_deg=0.27))
     b = mb.build_baseline(profile, site)
     r0 = np.array(site.radar.enu, dtype=float)
     p = r0 + np.array([300.0, 400.0, 80.0])
@@ -80,7 +82,7 @@ def test_detections_carry_our_r_and_the_same_drops(
     dets = b.radar_detections(RadarFrame(10.0, (mk(1, p, (1.0, 2.0, 0.0)), mk(2, far, None))))
     (d,) = dets  # beyond the gate: dropped
     # the report as ours takes it: corrected for the radar's misalignment
-    align = alignment_from_profile(profile, site)
+    align = alignment_from_site(site)
     assert align is not None
     q = align.track(mk(1, p, (1.0, 2.0, 0.0)))
     z = np.array([q.e, q.n, q.u])

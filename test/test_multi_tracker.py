@@ -22,7 +22,7 @@ from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.kalman import merge_nis, velocity_nis
 from uav_fusion.core.estimators.multi import MultiSettings, MultiTracker, run_multi
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
-from uav_fusion.core.site import Site, load_site
+from uav_fusion.core.site import RadarCalibration, Site, load_site
 
 FREQ_A = 2437e6
 
@@ -119,12 +119,14 @@ def test_the_radar_misalignment_is_corrected_before_any_report_is_used(site: Sit
     r0 = tuple(float(v) for v in site.radar.enu)
     skew = RadarAlignment(r0, -1.5, -0.5)  # type: ignore[arg-type]
     stream = [skew.frame(x) if isinstance(x, RadarFrame) else x for x in Crossing(site, 3).stream()]
-    plain = load_profile("tracker").with_changes(radar_az_bias_deg=0.0, radar_el_bias_deg=0.0)
-    aligned = plain.with_changes(radar_az_bias_deg=1.5, radar_el_bias_deg=0.5)
+    profile = load_profile("tracker")
+    exact = RadarCalibration(az_sigma_deg=0.0, el_sigma_deg=0.0)  # surveyed: not refined
+    plain = site.calibrated(exact)
+    aligned = site.calibrated(dataclasses.replace(exact, az_bias_deg=1.5, el_bias_deg=0.5))
     fixed = RadarAlignment(r0, 1.5, 0.5)  # type: ignore[arg-type]
-    a = run_multi(MultiTracker(aligned, site), stream, 1.0, 1000.0, 1099.0)
+    a = run_multi(MultiTracker(profile, aligned), stream, 1.0, 1000.0, 1099.0)
     b = run_multi(
-        MultiTracker(plain, site),
+        MultiTracker(profile, plain),
         [fixed.frame(x) if isinstance(x, RadarFrame) else x for x in stream],
         1.0,
         1000.0,
@@ -134,7 +136,7 @@ def test_the_radar_misalignment_is_corrected_before_any_report_is_used(site: Sit
         [(o.track_id, o.x.tolist()) for o in ep.tracks] for ep in b
     ]
     # and against the skewed reports as they come, the corrected run is closer to both UAVs
-    c = run_multi(MultiTracker(plain, site), stream, 1.0, 1000.0, 1099.0)
+    c = run_multi(MultiTracker(profile, plain), stream, 1.0, 1000.0, 1099.0)
 
     def err(epochs: list[GridEpoch]) -> float:
         e = []
@@ -346,8 +348,16 @@ def scene_stream(
             rcs = round(-10.0 + float(rng.normal(0.0, 2.0)), 3)
             reps.append(
                 RadarTrack(
-                    t, u.radar_id, 0.0, 0.0, 0.0, *map(float, p), ned, u.uav_prob,
-                    float(np.linalg.norm(p - r0)), rcs,
+                    t,
+                    u.radar_id,
+                    0.0,
+                    0.0,
+                    0.0,
+                    *map(float, p),
+                    ned,
+                    u.uav_prob,
+                    float(np.linalg.norm(p - r0)),
+                    rcs,
                 )
             )
         items.append((t, 0, RadarFrame(t, tuple(reps))))

@@ -31,6 +31,11 @@ SHIPPED = ("paper", "tracker", "tracker_smoothed")
 # extends (commit e0ffabd, the same files as 720647e), ``association: track_score`` read as
 # ``estimator: tracker``.
 FROZEN = json.loads((Path(__file__).parent / "data" / "profiles_e0ffabd.json").read_text())
+# Attributes that have left the profiles since, and where they went.
+MOVED = {
+    "radar_az_bias_deg": "the site file's radar.calibration, refined online",
+    "radar_el_bias_deg": "the site file's radar.calibration",
+}
 
 
 def _plain(v: Any) -> Any:
@@ -47,7 +52,8 @@ def _fields(p: Profile) -> dict[str, Any]:
 
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_profiles_resolve_to_the_values_they_had(name: str) -> None:
-    assert _fields(load_profile(name)) == FROZEN[name]
+    then = {k: v for k, v in FROZEN[name].items() if k not in MOVED}
+    assert _fields(load_profile(name)) == then
 
 
 @pytest.mark.parametrize("name", SHIPPED)

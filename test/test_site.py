@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.site import load_site, site_from_dict
+from uav_fusion.core.site import RadarCalibration, load_site, site_from_dict, write_calibration
 
 # E, N of each tower from LW1 (DESIGN §3).
 EXPECTED_EN = {
@@ -63,6 +63,24 @@ def _doc() -> dict:
         (lambda d: d.update(rf_sensors=["LW2", "LW9", "LW4"]), "unknown tower 'LW9'"),
         (lambda d: d.update(rf_sensors=["LW2", "LW3"]), "at least 3 RF sensors"),
         (lambda d: d["takeoff"].update(h="high"), "'h' must be a number"),
+        (
+            lambda d: d["radar"].update(calibration={"az_bias_deg": 12.0}),
+            r"site\.yaml: radar\.calibration\.az_bias_deg: a mounting misalignment of at most "
+            r"10 degrees, got 12\.0",
+        ),
+        (
+            lambda d: d["radar"].update(calibration={"el_bias_deg": float("nan")}),
+            r"site\.yaml: radar\.calibration: 'el_bias_deg' must be finite, got nan",
+        ),
+        (
+            lambda d: d["radar"].update(calibration={"az_sigma_deg": -0.1}),
+            r"radar\.calibration\.az_sigma_deg: must lie in \[0, 10\] \(0: known exactly\)",
+        ),
+        (
+            lambda d: d["radar"].update(calibration={"roll_deg": 1.0}),
+            r"radar\.calibration: unknown key 'roll_deg'",
+        ),
+        (lambda d: d["radar"].update(calibration=[0.5]), r"radar\.calibration: must be a mapping"),
     ],
 )
 def test_bad_site_is_rejected_with_a_clear_message(mutate, message: str) -> None:  # type: ignore[no-untyped-def]
@@ -75,3 +93,32 @@ def test_bad_site_is_rejected_with_a_clear_message(mutate, message: str) -> None
 def test_missing_site_file(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="site file not found"):
         load_site(tmp_path / "nope.yaml")
+
+
+def test_the_radar_calibration_is_read_and_defaults_to_uncalibrated() -> None:
+    site = load_site()
+    cal = site.radar.calibration
+    assert (cal.az_bias_deg, cal.el_bias_deg, cal.az_sigma_deg, cal.el_sigma_deg) == (0, 0, 1, 1)
+    doc = _doc()
+    doc["radar"]["calibration"] = {"az_bias_deg": 0.4, "el_sigma_deg": 0.0, "note": "surveyed"}
+    cal = site_from_dict(doc, Path("site.yaml")).radar.calibration
+    assert (cal.az_bias_deg, cal.el_bias_deg, cal.az_sigma_deg, cal.el_sigma_deg) == (
+        0.4, 0.0, 1.0, 0.0,
+    )  # fmt: skip
+    assert cal.note == "surveyed"
+
+
+def test_write_calibration_changes_only_the_calibration(tmp_path: Path) -> None:
+    src = Path(load_site().source or "")
+    first = write_calibration(src, tmp_path / "a.yaml", RadarCalibration(0.5, -0.25, 0.1, 0.2))
+    again = write_calibration(first, tmp_path / "b.yaml", RadarCalibration(-1.0, 0.0, 0.3, 0.3))
+    for path, az in ((first, 0.5), (again, -1.0)):
+        site = load_site(path)
+        assert site.radar.calibration.az_bias_deg == az
+        assert site.towers == load_site().towers and site.radar.enu == load_site().radar.enu
+        # every other line, comments included, as it was; one calibration block
+        added = [ln for ln in path.read_text().splitlines() if ln not in src.read_text()]
+        assert len(added) == 6 and path.read_text().count("\n  calibration:") == 1
+    with pytest.raises(ConfigError, match="no top-level 'radar:' section"):
+        (tmp_path / "bare.yaml").write_text("name: x\n")
+        write_calibration(tmp_path / "bare.yaml", tmp_path / "c.yaml", RadarCalibration())

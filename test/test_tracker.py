@@ -22,7 +22,7 @@ from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
 from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
 from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
-from uav_fusion.core.site import Site, load_site
+from uav_fusion.core.site import RadarCalibration, Site, load_site
 
 CLUTTER_ID = 999
 
@@ -106,14 +106,6 @@ def _imm(**changes: Any) -> dict[str, Any]:
             r"association\.ghost\.sigmas must be a number >= 0",
         ),
         (
-            lambda d: d["measurement"]["radar"].update(az_bias_deg=12.0),
-            r"measurement\.radar\.az_bias_deg must be a number in \[-10, 10\], got 12\.0",
-        ),
-        (
-            lambda d: d["measurement"]["radar"].update(el_bias_deg=float("nan")),
-            r"measurement\.radar\.el_bias_deg must be a number in \[-10, 10\], got nan",
-        ),
-        (
             lambda d: d["update"].update(notch_sigma_mps=-0.5),
             r"update\.notch_sigma_mps must be a number > 0",
         ),
@@ -163,10 +155,6 @@ def test_tracker_profiles_load_and_round_trip() -> None:
         again = profile_from_dict(p.as_dict())
         assert again.imm_transition == p.imm_transition and again.score == p.score
         assert again.smoother_lag_s == p.smoother_lag_s
-        assert (again.radar_az_bias_deg, again.radar_el_bias_deg) == (
-            p.radar_az_bias_deg,
-            p.radar_el_bias_deg,
-        )
     assert load_profile("tracker_smoothed").smoother_lag_s == 3.0
     assert not load_profile("paper").uses_tracker
 
@@ -256,9 +244,7 @@ class Scene:
                 self.fixes.append(RfAttempt(t + 0.05, k, True, 0.0, 0.0, e, nn, 9.0, 4, 4))
 
     def stream(self) -> list[RadarFrame | RfAttempt]:
-        items: list[tuple[float, int, RadarFrame | RfAttempt]] = [
-            (f.t, 0, f) for f in self.frames
-        ]
+        items: list[tuple[float, int, RadarFrame | RfAttempt]] = [(f.t, 0, f) for f in self.frames]
         items += [(a.t, 1, a) for a in self.fixes]
         items.sort(key=lambda x: (x[0], x[1]))
         return [x[2] for x in items]
@@ -693,8 +679,7 @@ def test_a_challenger_whose_radar_track_coasts_every_other_frame_still_takes_ove
     coasts = [
         (a, b)
         for a, b in zip(sc.frames, sc.frames[1:], strict=False)
-        if len(a.tracks) == len(b.tracks) == 2
-        and b.tracks[1].rcs_dbsm == a.tracks[1].rcs_dbsm
+        if len(a.tracks) == len(b.tracks) == 2 and b.tracks[1].rcs_dbsm == a.tracks[1].rcs_dbsm
     ]
     assert len(coasts) > 100
     tracker, steps = _run(sc, site)
@@ -707,9 +692,7 @@ def test_a_challenger_whose_radar_track_coasts_every_other_frame_still_takes_ove
     assert late and max(sc.error(s) for s in late) < 40.0
 
 
-@pytest.mark.parametrize(
-    ("key", "value"), [("challenge_margin", 20.0), ("challenge_s", 1000.0)]
-)
+@pytest.mark.parametrize(("key", "value"), [("challenge_margin", 20.0), ("challenge_s", 1000.0)])
 def test_a_challenger_must_outscore_the_followed_object_by_the_margin_for_the_time(
     site: Site, key: str, value: float
 ) -> None:
@@ -786,7 +769,7 @@ def test_far_gate_keeps_the_track_beyond_the_range_gate_with_horizontal_updates(
     assert before == [(s.status, s._state) for s in steps2 if s.t < first_far]
 
 
-def test_a_radar_mount_misalignment_is_corrected_with_the_calibrated_bias(site: Site) -> None:
+def test_a_radar_mount_misalignment_is_corrected_with_the_sites_calibration(site: Site) -> None:
     # the radar reports every angle 2 deg too far clockwise and 1 deg too high (turning the
     # reports by minus the bias adds it); the RF fixes are unbiased
     sc = Scene(site, seed=12)
@@ -794,11 +777,13 @@ def test_a_radar_mount_misalignment_is_corrected_with_the_calibrated_bias(site: 
     r0 = (float(sc.r0[0]), float(sc.r0[1]), float(sc.r0[2]))
     skew = RadarAlignment(r0, -2.0, -1.0)
     stream = [skew.frame(x) if isinstance(x, RadarFrame) else x for x in sc.stream()]
-    plain = load_profile("tracker").with_changes(radar_az_bias_deg=0.0, radar_el_bias_deg=0.0)
-    aligned = plain.with_changes(radar_az_bias_deg=2.0, radar_el_bias_deg=1.0)
+    profile = load_profile("tracker")
+    exact = RadarCalibration(az_sigma_deg=0.0, el_sigma_deg=0.0)  # surveyed: not refined
+    plain = site.calibrated(exact)
+    aligned = site.calibrated(dataclasses.replace(exact, az_bias_deg=2.0, el_bias_deg=1.0))
 
-    def mean_error(profile: Any, items: list[RadarFrame | RfAttempt]) -> tuple[float, list]:  # type: ignore[type-arg]
-        steps = run_tracker(Tracker(profile, site), items)
+    def mean_error(s: Site, items: list[RadarFrame | RfAttempt]) -> tuple[float, list]:  # type: ignore[type-arg]
+        steps = run_tracker(Tracker(profile, s), items)
         late = [s for s in steps if s.counted and s.t >= 30.0]
         assert len(late) > 500
         return float(np.mean([sc.error(s) for s in late])), steps
@@ -811,7 +796,8 @@ def test_a_radar_mount_misalignment_is_corrected_with_the_calibrated_bias(site: 
     # the correction is the same as feeding the tracker the corrected reports
     fixed = RadarAlignment(r0, 2.0, 1.0)
     again = run_tracker(
-        Tracker(plain, site), [fixed.frame(x) if isinstance(x, RadarFrame) else x for x in stream]
+        Tracker(profile, plain),
+        [fixed.frame(x) if isinstance(x, RadarFrame) else x for x in stream],
     )
     assert [(s.status, s._state) for s in again] == [(s.status, s._state) for s in steps]
 
@@ -877,8 +863,18 @@ def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
             prev = frames[-1].tracks[0]
             tr = f.tracks[0]
             coast = RadarTrack(
-                f.t, tr.track_id, 0.0, 0.0, 0.0, tr.e, tr.n, tr.u, prev.vel_ned, tr.uav_prob,
-                None, prev.rcs_dbsm,
+                f.t,
+                tr.track_id,
+                0.0,
+                0.0,
+                0.0,
+                tr.e,
+                tr.n,
+                tr.u,
+                prev.vel_ned,
+                tr.uav_prob,
+                None,
+                prev.rcs_dbsm,
             )
             f = RadarFrame(f.t, (coast,))
         frames.append(f)
@@ -893,9 +889,7 @@ def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
     assert len(coasts) == 16 and all(30.0 <= s.t < 34.0 for s in coasts)
     assert all(s.status == "discarded" for s in coasts)
     assert not any(s.reason == "coast" for s in steps_off)
-    used_off = [
-        s for s in steps_off if 30.0 <= s.t < 34.0 and s.updated and s.source == "radar"
-    ]
+    used_off = [s for s in steps_off if 30.0 <= s.t < 34.0 and s.updated and s.source == "radar"]
     assert len(used_off) == 16
 
 

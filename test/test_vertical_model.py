@@ -33,8 +33,6 @@ def site() -> Site:
 
 def _profiles() -> tuple[Profile, Profile]:
     shipped = load_profile("tracker")
-    # no misalignment in these scenes: nothing to correct
-    shipped = shipped.with_changes(radar_az_bias_deg=0.0, radar_el_bias_deg=0.0)
     before = shipped.with_changes(q=(20.0, 20.0, 4.0), radar_sigma_el_deg=1.6)
     return shipped, before
 

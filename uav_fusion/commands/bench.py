@@ -25,11 +25,14 @@ from uav_fusion.core.bench.report import (
     FIGURE_FILE,
     JSON_FILE,
     TABLE_FILE,
+    markdown_families,
     markdown_flights,
     markdown_table,
     pooled,
+    pooled_by_family,
     provenance,
     provenance_lines,
+    text_families,
     text_table,
     write_csv,
     write_figure,
@@ -127,9 +130,11 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("out/bench") / f"{definition.name}-{args.split}"
     out.mkdir(parents=True, exist_ok=True)
     missing = [f for f in flights if not f.exists()]
+    fams = definition.families[args.split] if definition.families else ()
+    in_worlds = f" x {len(fams)} world families ({', '.join(fams)})" if fams else ""
     print(
         f"bench {definition.name} ({definition.source}): split {args.split}, "
-        f"{len(flights)} flights ({len(definition.plans)} plans x "
+        f"{len(flights)} flights ({len(definition.plans)} plans{in_worlds} x "
         f"{len(definition.splits[args.split])} seeds), profiles {', '.join(names)}"
     )
     print(
@@ -176,15 +181,28 @@ def run(args: argparse.Namespace) -> int:
         f"airborne epochs (truth > {settings.airborne_min_m:g} m above take-off):"
     )
     print(text_table(scores))
+    by_family = pooled_by_family(results, settings) if definition.families else None
+    if by_family is not None:
+        print()
+        print(
+            f"per world family (worst flight mean: the largest mean error of one flight; "
+            f"longest: the longest run of epochs more than {settings.episode_error_m:g} m off):"
+        )
+        print(text_families(by_family, settings.episode_error_m))
     print()
     for line in provenance_lines(prov):
         print(f"  {line}")
     csv_path = write_csv(results, settings, out / CSV_FILE)
     table_path = out / TABLE_FILE
+    family_md = (
+        "" if by_family is None
+        else markdown_families(by_family, settings.episode_error_m) + "\n\n"
+    )  # fmt: skip
     table_path.write_text(
-        markdown_table(scores) + "\n\n" + markdown_flights(results, settings) + "\n",
+        markdown_table(scores) + "\n\n" + family_md + markdown_flights(results, settings)
+        + "\n",
         encoding="utf-8",
-    )
+    )  # fmt: skip
     print(f"per-flight figures: {csv_path}")
     if not args.no_figure:
         print(f"figure: {write_figure(results, settings, out / FIGURE_FILE)}")
@@ -194,11 +212,20 @@ def run(args: argparse.Namespace) -> int:
         f"runs {t_run:.1f} s for {len(tasks)} profile x flight tasks; {engine_desc})"
     )
     prov["wall_time"] = timing
-    json_path = write_summary_json(scores, prov, out / JSON_FILE)
+    json_path = write_summary_json(scores, prov, out / JSON_FILE, by_family)
     print(f"table (Markdown): {table_path}; summary: {json_path}")
     if args.readme:
         figures = {p: sc.as_dict() for p, sc in scores.items()}
-        _publish(args, definition, "accuracy", prov, figures)
+        extra: dict[str, Any] = {}
+        if by_family is not None:
+            extra = {
+                "episode_error_m": settings.episode_error_m,
+                "families": {
+                    fam: {p: sc.as_dict() for p, sc in by.items()}
+                    for fam, by in by_family.items()
+                },
+            }
+        _publish(args, definition, "worlds" if extra else "accuracy", prov, figures, extra)
     print(f"wall time {timing}")
     return 0
 
@@ -230,11 +257,12 @@ def _publish(
     kind: str,
     prov: dict[str, Any],
     figures: dict[str, dict[str, Any]],
+    extra: dict[str, Any] | None = None,
 ) -> None:
     """``--readme``: the results file, and the README's table rendered from it."""
     readme = Path(args.readme)
     name = results_name(definition.name, args.split)
-    doc = results_doc(kind, name, _command(args, definition), prov, figures)
+    doc = results_doc(kind, name, _command(args, definition), prov, figures, extra)
     path = write_results(results_path(readme, name), doc)
     text = readme.read_text(encoding="utf-8")
     readme.write_text(replace_block(text, name, render_block(doc)), encoding="utf-8")

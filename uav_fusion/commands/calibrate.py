@@ -15,8 +15,9 @@ from uav_fusion.core.scoring.calibration import (
     format_alignment,
     format_calibration,
     radar_alignment,
+    site_calibration,
 )
-from uav_fusion.core.site import load_site
+from uav_fusion.core.site import load_site, write_calibration
 from uav_fusion.core.twin.writers import MANIFEST
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
@@ -45,6 +46,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(default: the paper profile's evaluation.raw_radar_min_mean_uav_prob, 0.5)",
     )
     parser.add_argument("--strict", action="store_true", help="stop at the first bad row")
+    parser.add_argument(
+        "--write-site",
+        metavar="FILE",
+        help="write a copy of the site file with the measured misalignment as its "
+        "radar.calibration (the trackers correct every report by it)",
+    )
 
 
 def radar_position(
@@ -82,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
         res = angle_residuals(flight, radar, args.uav_prob)
         residuals.append(res)
         if len(folders) == 1:
-            cal = calibrate(flight, radar, site.radar.range_gate_m, args.uav_prob)
-            print(format_calibration(cal))
+            result = calibrate(flight, radar, site.radar.range_gate_m, args.uav_prob)
+            print(format_calibration(result))
             print()
         else:
             print(f"{folder}: {format_alignment(radar_alignment([res]), hint=False)}")
@@ -93,5 +100,18 @@ def run(args: argparse.Namespace) -> int:
                 print(f"Load {key}: {rep.summary()}")
     if len(folders) > 1:
         print()
-    print(format_alignment(radar_alignment(residuals)))
+    al = radar_alignment(residuals)
+    print(format_alignment(al))
+    if args.write_site:
+        if al is None:
+            raise ConfigError("--write-site: no UAV report near truth, nothing to calibrate")
+        note = f"uav_fusion calibrate over {len(folders)} flight(s): " + ", ".join(
+            Path(f).name for f in folders
+        )
+        cal = site_calibration(al, residuals, note)
+        out = write_calibration(site.source or args.site, args.write_site, cal)
+        print(
+            f"site with calibration az {cal.az_bias_deg:+.3f} +- {cal.az_sigma_deg:.3f} deg, "
+            f"el {cal.el_bias_deg:+.3f} +- {cal.el_sigma_deg:.3f} deg: {out}"
+        )
     return 0

@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.core.twin.config import DEFAULT_WAYPOINTS, load_twin_config
 from uav_fusion.core.twin.generate import generate_twin
 from uav_fusion.core.twin.trajectory import load_flight_plan
+from uav_fusion.core.twin.worlds import load_worlds
 from uav_fusion.core.twin.writers import write_twin
 from uav_fusion.resources import config_path
 
@@ -43,6 +45,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="multiply the radar scene's clutter, car and bird rates (default: the plan's)",
     )
     parser.add_argument("--site", help="site YAML (default: the shipped Lake Wheeler site)")
+    parser.add_argument(
+        "--world",
+        metavar="FAMILY",
+        help="draw the flight's physics from this world family (docs/twin.md, \"Worlds\"); "
+        "the folder gets world.yaml with the drawn values",
+    )
+    parser.add_argument(
+        "--worlds", help="world families YAML for --world (default: config/worlds.yaml)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,6 +61,9 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_twin_config(args.config)
     wp = Path(args.waypoints) if args.waypoints else config_path(DEFAULT_WAYPOINTS)
     plan = load_flight_plan(wp, site)
+    if args.worlds and not args.world:
+        raise ConfigError("--worlds needs --world FAMILY")
+    world = load_worlds(args.worlds).family(args.world) if args.world else None
     sensors = None
     if args.sensors:
         sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
@@ -62,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         radar_tower=args.radar_tower,
         sensors=sensors,
         scene_scale=args.scene_scale,
+        world=world,
     )
     paths = write_twin(twin, args.out)
     n_reports = sum(len(f.tracks) for f in twin.radar)
@@ -74,4 +89,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"  {paths['radar']}: {len(twin.radar)} frames, {n_reports} track reports")
     print(f"  {paths['rf']}: {len(twin.rf)} attempts, {n_fix} fixes")
     print(f"  {paths['manifest']}")
+    if twin.world is not None:
+        print(f"  {paths['world']}: world family '{twin.world.family}'")
     return 0

@@ -5,7 +5,7 @@ Loaded from a YAML file (see ``config/site_lake_wheeler.yaml``); no site fact li
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,27 @@ class Tower:
     enu: tuple[float, float, float]  # ENU of the antenna
 
 
+#: Largest mounting misalignment a site file may state (degrees).
+MAX_BIAS_DEG = 10.0
+CALIBRATION_KEYS = ("az_bias_deg", "el_bias_deg", "az_sigma_deg", "el_sigma_deg", "note")
+
+
+@dataclass(frozen=True)
+class RadarCalibration:
+    """The radar mount's measured misalignment (what a report's azimuth and elevation read
+    above the truth) and how well it is known (one-sigma). A deployment's calibration: the
+    trackers correct every report by it and refine the azimuth online from RF fixes
+    (:mod:`uav_fusion.core.estimators.registration`); ``uav_fusion calibrate --write-site``
+    measures it from a flight with truth. Uncalibrated: 0 +- 1 degree; a sigma of 0 says the
+    value is known exactly (a surveyed mount) and is not refined online."""
+
+    az_bias_deg: float = 0.0
+    el_bias_deg: float = 0.0
+    az_sigma_deg: float = 1.0
+    el_sigma_deg: float = 1.0
+    note: str = ""
+
+
 @dataclass(frozen=True)
 class RadarSite:
     tower: str
@@ -43,6 +64,7 @@ class RadarSite:
     fov_el_deg: float
     range_gate_m: float
     enu: tuple[float, float, float]  # ENU of the radar's phase centre
+    calibration: RadarCalibration = RadarCalibration()
 
     @property
     def h(self) -> float:
@@ -66,10 +88,12 @@ class Site:
     clock_offsets_h: dict[str, float] = field(default_factory=dict)
     source: Path | None = None
 
+    def calibrated(self, cal: RadarCalibration) -> Site:
+        """This site with the radar mount's calibration ``cal``."""
+        return replace(self, radar=replace(self.radar, calibration=cal))
+
     # --- geodesy -------------------------------------------------------------------------
-    def to_enu(
-        self, lat: Any, lon: Any, h: Any
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def to_enu(self, lat: Any, lon: Any, h: Any) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Geodetic (deg, deg, m HAE) to ENU metres about the site origin (arrays welcome)."""
         e, n, u = pymap3d.geodetic2enu(
             np.asarray(lat, dtype=float),
@@ -81,9 +105,7 @@ class Site:
         )
         return np.asarray(e, float), np.asarray(n, float), np.asarray(u, float)
 
-    def to_geodetic(
-        self, e: Any, n: Any, u: Any
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def to_geodetic(self, e: Any, n: Any, u: Any) -> tuple[FloatArray, FloatArray, FloatArray]:
         """ENU metres about the site origin to geodetic (deg, deg, m HAE)."""
         lat, lon, h = pymap3d.enu2geodetic(
             np.asarray(e, dtype=float),
@@ -131,6 +153,34 @@ def _latlon(d: dict[str, Any], where: str) -> tuple[float, float]:
     return lat, lon
 
 
+def _calibration(d: Any, where: str) -> RadarCalibration:
+    """``radar.calibration`` (absent: uncalibrated)."""
+    if d is None:
+        return RadarCalibration()
+    if not isinstance(d, dict):
+        raise ConfigError(f"{where}: must be a mapping of {', '.join(CALIBRATION_KEYS)}")
+    for k in d:
+        if k not in CALIBRATION_KEYS:
+            raise ConfigError(
+                f"{where}: unknown key '{k}' (allowed: {', '.join(CALIBRATION_KEYS)})"
+            )
+    base = RadarCalibration()
+    vals: dict[str, float] = {}
+    for key in CALIBRATION_KEYS[:4]:
+        v = _num(d, key, where) if key in d else float(getattr(base, key))
+        if key.endswith("bias_deg") and not abs(v) <= MAX_BIAS_DEG:
+            raise ConfigError(
+                f"{where}.{key}: a mounting misalignment of at most {MAX_BIAS_DEG:g} degrees, "
+                f"got {v}"
+            )
+        if key.endswith("sigma_deg") and not 0.0 <= v <= MAX_BIAS_DEG:
+            raise ConfigError(
+                f"{where}.{key}: must lie in [0, {MAX_BIAS_DEG:g}] (0: known exactly), got {v}"
+            )
+        vals[key] = v
+    return RadarCalibration(note=str(d.get("note", "") or ""), **vals)
+
+
 def site_from_dict(doc: dict[str, Any], source: Path | None = None) -> Site:
     """Build a :class:`Site` from a parsed YAML document, validating every field."""
     src = str(source) if source else "<site>"
@@ -176,6 +226,7 @@ def site_from_dict(doc: dict[str, Any], source: Path | None = None) -> Site:
         fov_el_deg=fov_el,
         range_gate_m=gate,
         enu=enu(rlat, rlon, rgh + mast),
+        calibration=_calibration(r.get("calibration"), f"{w}.calibration"),
     )
     raw_rf = _need(doc, "rf_sensors", src)
     if not isinstance(raw_rf, list):
@@ -213,3 +264,49 @@ def load_site(path: str | Path | None = None) -> Site:
     """Load a site YAML file (default: the shipped Lake Wheeler description)."""
     p = Path(path) if path is not None else config_path(DEFAULT_SITE)
     return site_from_dict(read_yaml_file(p, "site file"), p)
+
+
+def write_calibration(site_path: str | Path, out: str | Path, cal: RadarCalibration) -> Path:
+    """A copy of the site file ``site_path`` at ``out`` whose ``radar.calibration`` is
+    ``cal`` (the rest of the file, comments included, as it was). The copy is read back and
+    checked before it is kept."""
+    src = Path(site_path)
+    text = src.read_text(encoding="utf-8")
+    lines = text.splitlines()
+    try:
+        start = next(i for i, ln in enumerate(lines) if ln.rstrip() == "radar:")
+    except StopIteration:
+        raise ConfigError(f"{src}: no top-level 'radar:' section to calibrate") from None
+    end = start + 1
+    while end < len(lines) and (not lines[end].strip() or lines[end].startswith(" ")):
+        end += 1
+    while end > start + 1 and not lines[end - 1].strip():
+        end -= 1
+    block = lines[start + 1 : end]
+    kept: list[str] = []
+    skipping = False
+    for ln in block:  # drop an existing calibration sub-block
+        if ln.startswith("  calibration:"):
+            skipping = True
+            continue
+        if skipping and ln.startswith("    "):
+            continue
+        skipping = False
+        kept.append(ln)
+    note = cal.note.replace('"', "'")
+    new = [
+        "  calibration:               # the mount's misalignment (uav_fusion calibrate)",
+        f"    az_bias_deg: {cal.az_bias_deg:.4f}",
+        f"    el_bias_deg: {cal.el_bias_deg:.4f}",
+        f"    az_sigma_deg: {cal.az_sigma_deg:.4f}",
+        f"    el_sigma_deg: {cal.el_sigma_deg:.4f}",
+        f'    note: "{note}"',
+    ]
+    lines[start + 1 : end] = kept + new
+    dst = Path(out)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    dst.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    back = load_site(dst).radar.calibration
+    if abs(back.az_bias_deg - cal.az_bias_deg) > 1e-4:
+        raise ConfigError(f"{dst}: the written calibration does not read back")
+    return dst

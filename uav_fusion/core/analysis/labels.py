@@ -19,7 +19,12 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_flight
+from uav_fusion.core.bench.cache import (
+    CachedFlight,
+    cached_flights,
+    generate_flight,
+    generate_twin_flight,
+)
 from uav_fusion.core.bench.definition import BenchDefinition
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
@@ -27,9 +32,7 @@ from uav_fusion.core.estimators.emitters import emitter_key
 from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin import radar_model
-from uav_fusion.core.twin.config import load_twin_config
-from uav_fusion.core.twin.generate import TwinFlight, generate_twin
-from uav_fusion.core.twin.trajectory import load_flight_plan
+from uav_fusion.core.twin.generate import TwinFlight
 from uav_fusion.core.twin.writers import MANIFEST
 
 FloatArray = npt.NDArray[np.float64]
@@ -101,16 +104,12 @@ def labelled_flights(fs: FlightSet, progress: Progress | None = None) -> Iterato
     the kinds of its radar tracks from the twin generated again in memory. ``progress`` hears
     of each flight as its work starts."""
     definition = fs.definition
-    twin_cfg = load_twin_config(definition.twin_config)
     flights = prepared_flights(fs, progress)
     for k, cf in enumerate(flights, 1):
         if progress is not None:
             progress(f"[{k}/{len(flights)}] {cf.flight_id}")
         flight = load_flight(cf.folder, fs.site)
-        plan = load_flight_plan(cf.flight.plan.path, fs.site)
-        twin = generate_twin(
-            fs.site, twin_cfg, plan, seed=cf.flight.seed, duration_s=definition.duration_s
-        )
+        twin = generate_twin_flight(cf.flight, definition, fs.site)
         yield LabelledFlight(k, len(flights), cf, flight, radar_kinds(twin))
 
 

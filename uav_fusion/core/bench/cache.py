@@ -3,7 +3,8 @@
 A flight is generated with the digital twin into ``<cache>/<plan>-s<seed>-<key>/`` (the three
 Dataset-28 files, the twin's manifest, and ``bench_labels.json``). ``key`` is a hash of
 everything that decides the flight's bytes: the plan file, the twin parameter file and the
-site file (their contents), the twin's source code, the seed and the duration override; so a
+site file (their contents), the twin's source code, the seed, the duration override and, for a
+flight generated in a world family, the family's name and the families file; so a
 changed twin or plan gives a new folder and an old folder is never used for it. Generation is
 deterministic (same inputs, same bytes) and atomic (written to a temporary folder, then
 renamed), so parallel workers and interrupted runs cannot leave a half-written flight behind.
@@ -26,12 +27,13 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.bench.definition import BenchDefinition, BenchFlight
-from uav_fusion.core.errors import DataError
+from uav_fusion.core.errors import ConfigError, DataError
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin import radar_model
 from uav_fusion.core.twin.config import load_twin_config
 from uav_fusion.core.twin.generate import TwinFlight, generate_twin
 from uav_fusion.core.twin.trajectory import load_flight_plan
+from uav_fusion.core.twin.worlds import WorldFamilies
 from uav_fusion.core.twin.writers import write_twin
 
 FloatArray = npt.NDArray[np.float64]
@@ -82,7 +84,29 @@ def flight_key(
     _digest(h, "twin_source", twin_digest.encode())
     _digest(h, "seed", str(flight.seed).encode())
     _digest(h, "duration", repr(definition.duration_s).encode())
+    if flight.family is not None:  # only then: the twin's own flights keep their keys
+        worlds = _worlds(definition)
+        _digest(h, "world_family", flight.family.encode())
+        _digest(h, "worlds", worlds.source.read_bytes())
     return h.hexdigest()[:16]
+
+
+def _worlds(definition: BenchDefinition) -> WorldFamilies:
+    if definition.worlds is None:
+        raise ConfigError(f"{definition.source}: flights in world families need a worlds file")
+    return definition.worlds
+
+
+def generate_twin_flight(
+    flight: BenchFlight, definition: BenchDefinition, site: Site
+) -> TwinFlight:
+    """The twin's flight of a benchmark flight, in memory (the bytes the cache holds)."""
+    cfg = load_twin_config(definition.twin_config)
+    plan = load_flight_plan(flight.plan.path, site)
+    world = None if flight.family is None else _worlds(definition).family(flight.family)
+    return generate_twin(
+        site, cfg, plan, seed=flight.seed, duration_s=definition.duration_s, world=world
+    )
 
 
 def cached_flights(
@@ -119,6 +143,8 @@ def write_labels(twin: TwinFlight, folder: Path, flight: BenchFlight, key: str) 
         "key": key,
         "uav_radar_report_times": uav_report_times(twin),
     }
+    if flight.family is not None:
+        doc["family"] = flight.family
     if twin.others:
         doc["vehicle_radar_report_times"] = {
             name: uav_report_times(twin, i) for i, (name, _) in enumerate(twin.vehicles)
@@ -166,9 +192,7 @@ def generate_flight(cf: CachedFlight, definition: BenchDefinition, site: Site) -
     tmp = cf.folder.parent / f".tmp-{cf.folder.name}-{os.getpid()}"
     if tmp.exists():
         shutil.rmtree(tmp)
-    cfg = load_twin_config(definition.twin_config)
-    plan = load_flight_plan(cf.flight.plan.path, site)
-    twin = generate_twin(site, cfg, plan, seed=cf.flight.seed, duration_s=definition.duration_s)
+    twin = generate_twin_flight(cf.flight, definition, site)
     write_twin(twin, tmp)
     write_labels(twin, tmp, cf.flight, cf.key)
     try:

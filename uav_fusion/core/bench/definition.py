@@ -13,7 +13,13 @@ Keys (unknown keys are errors naming the file and the key):
     flight plan names (``config/waypoints/<name>.yaml``) or YAML paths (relative to the
     definition's folder);
 ``splits``
-    ``tune`` and ``test``: lists of integer seeds >= 0, disjoint;
+    ``tune`` and ``test``: lists of integer seeds >= 0, disjoint; or, for flights generated in
+    drawn worlds (docs/twin.md, "Worlds"), mappings ``{seeds: [...], families: [...]}``: every
+    plan is flown in every listed world family with every seed, and the two halves share no
+    family (leave families out: the test half's worlds come from families tuning never sees);
+``worlds``
+    the world families file (default ``config/worlds.yaml``; relative to the definition; only
+    with families in the splits);
 ``twin_config``
     twin parameter file (default ``config/twin_default.yaml``; relative to the definition);
 ``duration_s``
@@ -25,6 +31,7 @@ Keys (unknown keys are errors naming the file and the key):
 ``scoring``
     ``grid_hz`` (10; 1 for ``multi``), ``airborne_min_m`` (5), ``fresh_age_s`` (1),
     ``gross_error_m`` (100), ``observable_window_s`` (2), ``nees_probability`` (0.95),
+    ``episode_error_m`` (300: a gross episode is a run of epochs with a larger error),
     ``excuse_grounded`` (true; ``multi`` only: a track on a UAV that is not airborne is
     excused rather than false, see :mod:`uav_fusion.core.scoring.gospa`).
 """
@@ -38,6 +45,7 @@ from typing import Any
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.scoring.fixed_rate import ScoreSettings
+from uav_fusion.core.twin.worlds import DEFAULT_WORLDS, WorldFamilies, load_worlds
 from uav_fusion.core.yamlio import read_yaml_file
 from uav_fusion.resources import bench_path, config_path
 
@@ -53,6 +61,7 @@ _TOP_KEYS = (
     "plans",
     "splits",
     "twin_config",
+    "worlds",
     "duration_s",
     "scoring",
 )
@@ -64,6 +73,7 @@ _SCORING_KEYS = (
     "gross_error_m",
     "observable_window_s",
     "nees_probability",
+    "episode_error_m",
     "excuse_grounded",
 )
 
@@ -81,10 +91,13 @@ class BenchFlight:
     plan: PlanRef
     seed: int
     split: str
+    family: str | None = None  # the world family it is generated in (None: the twin's own)
 
     @property
     def flight_id(self) -> str:
-        return f"{self.plan.name}-s{self.seed}"
+        if self.family is None:
+            return f"{self.plan.name}-s{self.seed}"
+        return f"{self.plan.name}-{self.family}-s{self.seed}"
 
 
 @dataclass(frozen=True)
@@ -100,6 +113,8 @@ class BenchDefinition:
     source: Path
     targets: str = "single"
     excuse_grounded: bool = True  # multi: tracks on UAVs not airborne are not false
+    families: dict[str, tuple[str, ...]] | None = None  # world families per split
+    worlds: WorldFamilies | None = None  # the families file, loaded (with ``families``)
 
     @property
     def multi(self) -> bool:
@@ -107,10 +122,19 @@ class BenchDefinition:
         return self.targets == "multi"
 
     def flights(self, split: str) -> list[BenchFlight]:
-        """The split's flights, plan by plan, seed by seed."""
+        """The split's flights: plan by plan, seed by seed; with world families, family by
+        family first."""
         if split not in self.splits:
             raise ConfigError(f"{self.source}: unknown split {split!r} (have {', '.join(SPLITS)})")
-        return [BenchFlight(p, s, split) for p in self.plans for s in self.splits[split]]
+        seeds = self.splits[split]
+        if self.families is None:
+            return [BenchFlight(p, s, split) for p in self.plans for s in seeds]
+        return [
+            BenchFlight(p, s, split, fam)
+            for fam in self.families[split]
+            for p in self.plans
+            for s in seeds
+        ]
 
 
 def definition_path(path_or_name: str | Path | None) -> Path:
@@ -156,6 +180,68 @@ def _seeds(v: Any, key: str, where: str) -> tuple[int, ...]:
     return tuple(out)
 
 
+def _world_split(raw: dict[str, Any], key: str, where: str) -> tuple[tuple[int, ...],
+                                                                       tuple[str, ...]]:
+    """A split flown in world families: ``{seeds: [...], families: [...]}``."""
+    extra = sorted(set(raw) - {"seeds", "families"})
+    if extra:
+        raise ConfigError(
+            f"{where}: unknown key(s) {', '.join(f'{key}.{x}' for x in extra)} "
+            "(allowed: seeds, families)"
+        )
+    seeds = _seeds(raw.get("seeds"), f"{key}.seeds", where)
+    fams = raw.get("families")
+    if not isinstance(fams, list) or not fams or not all(isinstance(f, str) for f in fams):
+        raise ConfigError(f"{where}: {key}.families must be a non-empty list of family names")
+    for f in fams:
+        if fams.count(f) > 1:
+            raise ConfigError(f"{where}: {key}.families: {f!r} is listed twice")
+    return seeds, tuple(fams)
+
+
+def _families(
+    doc: dict[str, Any], fams: dict[str, tuple[str, ...]], base: Path, where: str
+) -> tuple[dict[str, tuple[str, ...]] | None, WorldFamilies | None]:
+    """The splits' world families (both halves or neither, disjoint) and their file."""
+    wf = doc.get("worlds")
+    if not fams:
+        if wf is not None:
+            raise ConfigError(
+                f"{where}: worlds: a families file needs world families in the splits "
+                "(splits.<half>: {seeds: [...], families: [...]})"
+            )
+        return None, None
+    if set(fams) != set(SPLITS):
+        missing = [k for k in SPLITS if k not in fams]
+        raise ConfigError(
+            f"{where}: splits.{missing[0]} must name its world families too "
+            "({seeds: [...], families: [...]}): both halves or neither"
+        )
+    common = sorted(set(fams["tune"]) & set(fams["test"]))
+    if common:
+        raise ConfigError(
+            f"{where}: splits.test.families: {', '.join(common)} also in splits.tune.families "
+            "(the test half's worlds come from families tuning never sees)"
+        )
+    if wf is None:
+        path = config_path(DEFAULT_WORLDS)
+    elif isinstance(wf, str) and wf.strip():
+        path = Path(wf) if Path(wf).is_absolute() else base / wf
+        if not path.is_file():
+            raise ConfigError(f"{where}: worlds: file {path} not found")
+    else:
+        raise ConfigError(f"{where}: worlds must be a file path or null, got {wf!r}")
+    worlds = load_worlds(path)
+    for k in SPLITS:
+        for f in fams[k]:
+            if f not in worlds.families:
+                raise ConfigError(
+                    f"{where}: splits.{k}.families: unknown world family {f!r} in {path} "
+                    f"(known: {', '.join(worlds.families)})"
+                )
+    return {k: fams[k] for k in SPLITS}, worlds
+
+
 def _number(d: dict[str, Any], key: str, where: str, default: float, positive: bool) -> float:
     v = d.get(key, default)
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
@@ -192,10 +278,16 @@ def definition_from_dict(doc: Any, source: Path) -> BenchDefinition:
         if k not in SPLITS:
             raise ConfigError(f"{where}: unknown key 'splits.{k}' (allowed: {', '.join(SPLITS)})")
     splits = {}
+    fams: dict[str, tuple[str, ...]] = {}
     for k in SPLITS:
         if k not in raw_splits:
             raise ConfigError(f"{where}: splits.{k} is missing")
-        splits[k] = _seeds(raw_splits[k], f"splits.{k}", where)
+        raw = raw_splits[k]
+        if isinstance(raw, dict):
+            splits[k], fams[k] = _world_split(raw, f"splits.{k}", where)
+        else:
+            splits[k] = _seeds(raw, f"splits.{k}", where)
+    families, worlds = _families(doc, fams, base, where)
     common = sorted(set(splits["tune"]) & set(splits["test"]))
     if common:
         raise ConfigError(
@@ -241,6 +333,7 @@ def definition_from_dict(doc: Any, source: Path) -> BenchDefinition:
         observable_window_s=_number(sc, "observable_window_s", sw, d.observable_window_s, True),
         max_truth_gap_s=d.max_truth_gap_s,
         nees_probability=prob,
+        episode_error_m=_number(sc, "episode_error_m", sw, d.episode_error_m, True),
     )
     excuse = sc.get("excuse_grounded", True)
     if not isinstance(excuse, bool):
@@ -258,6 +351,8 @@ def definition_from_dict(doc: Any, source: Path) -> BenchDefinition:
         source=source,
         targets=str(targets),
         excuse_grounded=excuse,
+        families=families,
+        worlds=worlds,
     )
 
 

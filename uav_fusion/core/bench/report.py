@@ -133,12 +133,13 @@ def markdown_table(scores: Mapping[str, GridScore]) -> str:
 
 
 CSV_FIELDS = (
-    "profile", "flight", "plan", "seed", "split", "epochs", "coverage_pct",
+    "profile", "flight", "plan", "seed", "family", "split", "epochs", "coverage_pct",
     "fresh_coverage_pct", "err_mean_m", "err_p50_m", "err_p95_m", "err_max_m", "gross_pct",
     "observable_epochs", "observable_coverage_pct", "observable_gross_pct",
     "observable_after_start_pct", "anees",
     "nees_in95_pct", "ttf_s", "restarts", "gross_vertical_pct", "gross_age_p50_s",
-    "gross_rf_pct", "steps", "seconds",
+    "gross_rf_pct", "longest_gross_s", "registration_az_deg", "registration_az_sigma_deg",
+    "steps", "seconds",
 )
 
 # the per-flight Markdown table, (GridScore field, header, format): most of the printed
@@ -155,8 +156,79 @@ FLIGHT_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("gross_vertical_pct", "gross: vertical %", ".0f"),
     ("gross_age_p50_s", "gross: age p50 s", ".1f"),
     ("gross_rf_pct", "gross: last RF %", ".0f"),
+    ("longest_gross_s", "longest gross episode s", ".1f"),
     _PRINTED["restarts"],
 )
+
+# the per-family table of a definition flown in world families: (GridScore field, header,
+# format); the header of longest_gross_s names the episode threshold
+ALL_FAMILIES = "all"
+FAMILY_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("flights", "flights", "d"),
+    ("coverage_pct", "cov %", ".1f"),
+    ("err_mean_m", "mean m", ".1f"),
+    ("err_p95_m", "p95 m", ".1f"),
+    ("flight_mean_max_m", "worst flight mean m", ".1f"),
+    ("longest_gross_s", "longest > {episode:g} m s", ".1f"),
+    ("anees", "ANEES", ".1f"),
+    ("nees_in95_pct", "NEES in 95 % %", ".1f"),
+)
+
+
+def pooled_by_family(
+    results: Sequence[FlightResult], settings: ScoreSettings
+) -> dict[str, dict[str, GridScore]]:
+    """Family -> profile -> the figures pooled over the family's flights, families in the
+    order they first appear, then ``ALL_FAMILIES``: every flight of the results."""
+    groups: dict[str, dict[str, list[FlightResult]]] = {}
+    for r in results:
+        groups.setdefault(r.family or "-", {}).setdefault(r.profile, []).append(r)
+    out = {
+        fam: {p: pool([r.samples for r in rs], settings) for p, rs in by.items()}
+        for fam, by in groups.items()
+    }
+    out[ALL_FAMILIES] = pooled(results, settings)
+    return out
+
+
+def _family_rows(
+    by_family: Mapping[str, Mapping[str, GridScore]], episode_m: float
+) -> tuple[list[str], list[list[str]]]:
+    heads = ["family", "profile"] + [h.format(episode=episode_m) for _, h, _ in FAMILY_COLUMNS]
+    rows = []
+    n_fam = sum(1 for f in by_family if f != ALL_FAMILIES)
+    for fam, by in by_family.items():
+        label = f"all {n_fam} families" if fam == ALL_FAMILIES else fam
+        for prof, sc in by.items():
+            rows.append(
+                [label, prof]
+                + [format_value(getattr(sc, f), fmt) for f, _, fmt in FAMILY_COLUMNS]
+            )
+    return heads, rows
+
+
+def markdown_families(
+    by_family: Mapping[str, Mapping[str, GridScore]], episode_m: float
+) -> str:
+    """The per-family table in Markdown (a row per family and profile, the pool last)."""
+    heads, rows = _family_rows(by_family, episode_m)
+    out = ["| " + " | ".join(heads) + " |", "|---|---|" + "---:|" * len(FAMILY_COLUMNS)]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def text_families(
+    by_family: Mapping[str, Mapping[str, GridScore]], episode_m: float
+) -> str:
+    """The per-family table, fixed-width (for terminals)."""
+    heads, rows = _family_rows(by_family, episode_m)
+    widths = [max(len(r[i]) for r in [heads, *rows]) for i in range(len(heads))]
+
+    def line(cells: list[str]) -> str:
+        pairs = zip(cells, widths, strict=True)
+        return "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(pairs))
+
+    return "\n".join([line(heads), "  ".join("-" * w for w in widths), *map(line, rows)])
 
 
 def per_flight_scores(
@@ -174,8 +246,12 @@ def write_csv(
         for r, s in per_flight_scores(results, settings):
             d: dict[str, Any] = {
                 "profile": r.profile, "flight": r.flight_id, "plan": r.plan, "seed": r.seed,
-                "split": r.split, "steps": r.steps, "seconds": f"{r.seconds:.3f}",
+                "family": r.family or "", "split": r.split, "steps": r.steps,
+                "seconds": f"{r.seconds:.3f}",
             }
+            if r.registration is not None:
+                d["registration_az_deg"] = f"{r.registration[0]:.3f}"
+                d["registration_az_sigma_deg"] = f"{r.registration[1]:.3f}"
             for k, v in s.as_dict().items():
                 if k in CSV_FIELDS and k not in d:
                     d[k] = "" if isinstance(v, float) and not math.isfinite(v) else (
@@ -186,7 +262,10 @@ def write_csv(
 
 
 def write_summary_json(
-    scores: Mapping[str, GridScore], prov: Mapping[str, Any], path: Path
+    scores: Mapping[str, GridScore],
+    prov: Mapping[str, Any],
+    path: Path,
+    families: Mapping[str, Mapping[str, GridScore]] | None = None,
 ) -> Path:
     def clean(d: dict[str, Any]) -> dict[str, Any]:
         return {
@@ -194,7 +273,14 @@ def write_summary_json(
             for k, v in d.items()
         }
 
-    doc = {"provenance": dict(prov), "pooled": {p: clean(s.as_dict()) for p, s in scores.items()}}
+    doc: dict[str, Any] = {
+        "provenance": dict(prov),
+        "pooled": {p: clean(s.as_dict()) for p, s in scores.items()},
+    }
+    if families is not None:
+        doc["families"] = {
+            fam: {p: clean(s.as_dict()) for p, s in by.items()} for fam, by in families.items()
+        }
     path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return path
 

@@ -21,11 +21,13 @@ from pathlib import Path
 from typing import Any
 
 from uav_fusion.core.bench.multi import MultiBenchScore, markdown_multi
-from uav_fusion.core.bench.report import markdown_table
+from uav_fusion.core.bench.report import markdown_families, markdown_table
 from uav_fusion.core.scoring.fixed_rate import GridScore
 
 RESULTS_DIR = Path("bench") / "results"
-KINDS = ("accuracy", "multi")
+# accuracy: one UAV; worlds: one UAV in world families (the pooled figures and, per family,
+# ``families`` with the gross-episode threshold ``episode_error_m``); multi: several UAVs
+KINDS = ("accuracy", "worlds", "multi")
 # timing figures vary from run to run: they stay in the run's own summary.json
 TIMING_FIELDS = frozenset({"run_s"})
 
@@ -58,11 +60,13 @@ def results_doc(
     command: str,
     prov: Mapping[str, Any],
     figures: Mapping[str, Mapping[str, Any]],
+    extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The results file's contents: what was run, on what, and the pooled figures per profile."""
+    """The results file's contents: what was run, on what, and the pooled figures per profile
+    (``extra``: for ``worlds``, ``episode_error_m`` and the per-family figures ``families``)."""
     if kind not in KINDS:
         raise ValueError(f"unknown benchmark kind {kind!r} (expected one of {KINDS})")
-    return {
+    doc: dict[str, Any] = {
         "name": name,
         "kind": kind,
         "command": command,
@@ -72,6 +76,14 @@ def results_doc(
         "versions": dict(prov["versions"]),
         "profiles": {p: _clean(f) for p, f in figures.items()},
     }
+    if kind == "worlds":
+        if not extra or "families" not in extra:
+            raise ValueError("a worlds results file needs the per-family figures")
+        doc["episode_error_m"] = float(extra["episode_error_m"])
+        doc["families"] = {
+            fam: {p: _clean(f) for p, f in by.items()} for fam, by in extra["families"].items()
+        }
+    return doc
 
 
 def write_results(path: Path, doc: Mapping[str, Any]) -> Path:
@@ -95,6 +107,12 @@ def render_table(doc: Mapping[str, Any]) -> str:
     if doc["kind"] == "accuracy":
         grid = {p: GridScore(**_nan(f)) for p, f in profiles.items()}
         return markdown_table(grid)
+    if doc["kind"] == "worlds":
+        fams = {
+            fam: {p: GridScore(**_nan(f)) for p, f in by.items()}
+            for fam, by in doc["families"].items()
+        }
+        return markdown_families(fams, float(doc["episode_error_m"]))
     multi = {p: MultiBenchScore(**{"run_s": math.nan, **_nan(f)}) for p, f in profiles.items()}
     return markdown_multi(multi, timing=False)
 

@@ -53,6 +53,9 @@ class FlightResult:
     samples: GridSamples
     steps: int
     seconds: float
+    family: str | None = None  # the world family of the flight (None: the twin's own world)
+    #: the radar registration at the end of the run (azimuth, its sigma; degrees), if any
+    registration: tuple[float, float] | None = None
 
 
 def generate_task(task: GenerateTask) -> bool:
@@ -81,4 +84,14 @@ def score_task(task: ScoreTask) -> FlightResult:
         samples=samples,
         steps=len(result.steps),
         seconds=time.perf_counter() - t0,
+        family=cf.flight.family,
+        registration=registration(result.status),
     )
+
+
+def registration(status: dict[str, object]) -> tuple[float, float] | None:
+    """The azimuth registration (estimate, sigma; degrees) of an estimator's status."""
+    az, sd = status.get("registration_az_deg"), status.get("registration_az_sigma_deg")
+    if az is None or sd is None:
+        return None
+    return float(str(az)), float(str(sd))

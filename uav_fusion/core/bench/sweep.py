@@ -9,8 +9,9 @@ A sweep spec (YAML, e.g. ``bench/sweep_q.yaml``) names:
     ``bench/`` or a path relative to the spec; default ``accuracy``);
 ``split``
     ``tune`` (default) or ``test``: which half's seeds (tuning belongs on ``tune``);
-``plans``, ``seeds``
-    optional subsets of the definition's plans and of the split's seeds;
+``plans``, ``seeds``, ``families``
+    optional subsets of the definition's plans, of the split's seeds and (a definition flown
+    in world families) of the split's families;
 ``profiles``
     estimator profiles (names under ``config/profiles/`` or paths relative to the spec);
 ``parameters``
@@ -82,6 +83,7 @@ _TOP_KEYS = (
     "split",
     "plans",
     "seeds",
+    "families",
     "profiles",
     "parameters",
     "metric",
@@ -111,6 +113,7 @@ class SweepSpec:
     parameters: dict[str, tuple[Any, ...]]
     metric: str
     source: Path
+    families: tuple[str, ...] | None = None  # world families in the sweep (None: no worlds)
 
     @property
     def metrics(self) -> tuple[str, ...]:
@@ -194,6 +197,20 @@ def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
                 f"{src}: seeds: seed {s!r} is not in the {split} half of {definition.source} "
                 f"({', '.join(str(x) for x in have_seeds)})"
             )
+    have_fams = list(definition.families[split]) if definition.families else []
+    fams = doc.get("families", have_fams)
+    if "families" in doc and not have_fams:
+        raise ConfigError(
+            f"{src}: families: the definition {definition.source} flies no world families"
+        )
+    if not isinstance(fams, list) or (have_fams and not fams):
+        raise ConfigError(f"{src}: families: a non-empty list of world family names expected")
+    for f in fams:
+        if f not in have_fams:
+            raise ConfigError(
+                f"{src}: families: {f!r} is not a family of the {split} half of "
+                f"{definition.source} ({', '.join(have_fams)})"
+            )
     profs = doc.get("profiles")
     if not isinstance(profs, list) or not profs or not all(isinstance(p, str) for p in profs):
         raise ConfigError(f"{src}: profiles: a non-empty list of profile names expected")
@@ -228,6 +245,7 @@ def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
         parameters=params,
         metric=metric,
         source=source,
+        families=tuple(fams) if have_fams else None,
     )
     # apply every combination to every profile once, so a value the profile refuses (e.g. a
     # q of the wrong sign) stops here, naming the spec and the parameter, not in a worker
@@ -290,7 +308,9 @@ def sweep_tasks(spec: SweepSpec, cache_dir: Path, site_file: Path, site: Site) -
     flights = [
         f
         for f in cached_flights(spec.definition, spec.split, cache_dir, site_file)
-        if f.flight.plan.name in spec.plans and f.flight.seed in spec.seeds
+        if f.flight.plan.name in spec.plans
+        and f.flight.seed in spec.seeds
+        and (spec.families is None or f.flight.family in spec.families)
     ]
     out = []
     for f in flights:
@@ -319,6 +339,7 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         "flight": task.flight.flight_id,
         "plan": task.flight.flight.plan.name,
         "seed": task.flight.flight.seed,
+        "family": task.flight.flight.family or "",
         "profile": task.profile_path.stem,
         "params": task.params,
         "error": "",
@@ -402,7 +423,7 @@ def _json_default(v: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {v!r}")
 
 
-RESULT_COLUMNS = ("flight", "plan", "seed", "profile")
+RESULT_COLUMNS = ("flight", "plan", "seed", "family", "profile")
 
 
 def write_table(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Path:
@@ -416,7 +437,7 @@ def write_table(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Path
         w.writerow([*RESULT_COLUMNS, *pnames, *spec.metrics, "seconds", "key"])
         for r in rows:
             w.writerow(
-                [r[c] for c in RESULT_COLUMNS]
+                [r.get(c, "") for c in RESULT_COLUMNS]
                 + [_cell(r["params"].get(p)) for p in pnames]
                 + [_cell(r.get(m)) for m in spec.metrics]
                 + [r.get("seconds", ""), r["key"]]

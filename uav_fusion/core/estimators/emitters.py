@@ -56,9 +56,14 @@ class Emitters:
         r = mt.rf_r.r_for(att.cep, att.valid_sensors)
         z = (att.e, att.n)
         em = emitter_key(att.center_freq_hz)
-        mt.objects.rf_fix(t, att.e, att.n, 0.5 * (r[0] + r[2]), em)
+        var = 0.5 * (r[0] + r[2])
+        mt.objects.rf_fix(t, att.e, att.n, var, em)
         mt._advance(t)
         own = [tr for tr in mt.tracks if tr.emitter == em and tr.t <= t]
+        obj = mt.objects.credited
+        if obj is not None and any(tr.confirmed and tr.followed == obj.id for tr in own):
+            # the fix and the radar object its emitter's track follows agree: registration
+            mt.front.register(t, att.e, att.n, var, obj)
         tentative_only = not mt.settings.tentative_takes_radar and all(
             not tr.confirmed for tr in own
         )

@@ -271,11 +271,17 @@ class RadarFollower:
     ) -> list[tuple[int, TrackerStep]]:
         tr = self.tr
         cfg = tr.cfg
-        ok = [
-            e
-            for e in cands
-            if e[3] >= cfg.init_min and e[2].n_reports >= cfg.init_min_reports
-        ]
+        refused: dict[int, str] = {}
+        ok = []
+        for e in cands:
+            if e[3] < cfg.init_min or e[2].n_reports < cfg.init_min_reports:
+                continue
+            why = tr.gates.refuse_start(e[2], t, zs[e[0]][0], zs[e[0]][1])
+            if why is None:
+                ok.append(e)
+            else:  # the UAV cannot be there, or a ground object no second source confirms
+                refused[e[0]] = why
+                tr._count(f"init_refused_{why}")
         res: list[tuple[int, TrackerStep]] = []
         best = max(ok, key=lambda e: (e[3], -e[0])) if ok else None
         if best is not None and RADAR in tr.profile.init_sources:
@@ -300,6 +306,7 @@ class RadarFollower:
             why = "no_track" if tr.filter is None or not tr.confirmed else "not_selected"
             if tr.filter is not None and not tr.confirmed:
                 why = "tentative_track"
+            why = refused.get(e[0], why)
             res.append(
                 (e[0], tr._step(t, RADAR, DISCARDED, why, None, zs[e[0]], e[1].track_id, e[3]))
             )

@@ -210,6 +210,7 @@ class MultiTracker:
         return {
             "multi_tracks_confirmed": len(confirmed),
             "multi_track_ids": " ".join(str(t.id) for t in confirmed) or "-",
+            **self.front.status(),
         }
 
     def _outputs(self, epochs: list[GridEpoch]) -> Outputs:

@@ -194,6 +194,8 @@ class ObjectTable:
     """Every radar object of a flight, updated by every report of every frame."""
 
     def __init__(self, cfg: ScoreConfig, radar_r: RadarRModel) -> None:
+        #: the object the last RF fix was credited to (``rf_nearest_only``), or None
+        self.credited: RadarObject | None = None
         self.cfg = cfg
         self.radar_r = radar_r
         self.objects: dict[int, RadarObject] = {}
@@ -385,13 +387,13 @@ class ObjectTable:
                 obj.fused = a * obj.fused + (1.0 - a) * v
         obj.fused_t = t
 
-    def rf_fix(
-        self, t: float, e: float, n: float, var_m2: float, key: str | None = None
-    ) -> int:
+    def rf_fix(self, t: float, e: float, n: float, var_m2: float, key: str | None = None) -> int:
         """Credit every recent object whose predicted position agrees with an RF fix (of the
-        emitter ``key``, when known); returns the number of objects credited."""
+        emitter ``key``, when known); returns the number of objects credited. With
+        ``rf_nearest_only`` the one object credited is :attr:`credited` (else None)."""
         cfg = self.cfg
         hits = 0
+        self.credited = None
         best: tuple[float, RadarObject] | None = None
         for obj in self.objects.values():
             kf = obj.kf
@@ -420,7 +422,7 @@ class ObjectTable:
                 obj.rf_key = key
                 hits += 1
         if best is not None:
-            obj = best[1]
+            obj = self.credited = best[1]
             obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
             obj.rf_t = t
             obj.rf_key = key
@@ -431,9 +433,7 @@ class ObjectTable:
             self._orphans.append((t, e, n, var_m2, key))
         return hits
 
-    def _adopt_orphans(
-        self, obj: RadarObject, t: float, e: float, n: float, r: PackedR
-    ) -> None:
+    def _adopt_orphans(self, obj: RadarObject, t: float, e: float, n: float, r: PackedR) -> None:
         """Give a new object the support of the kept fixes that credited nobody and fall
         inside its gate (first report ``e``, ``n`` with R ``r``); those fixes are used up."""
         cfg = self.cfg

@@ -41,6 +41,8 @@ class RunResult:
     info: StreamInfo | None = None
     profile_name: str = ""
     extra: dict[str, int] = field(default_factory=dict)
+    #: the estimator's status at the end of the run (its /diagnostics keys)
+    status: dict[str, object] = field(default_factory=dict)
 
     def paper_counts(self) -> dict[str, int]:
         """The counts behind the paper's Table II rows.
@@ -184,4 +186,6 @@ def run_flight(flight: Flight, profile: Profile, site: Site) -> RunResult:
     counters["radar_reports"] = info.radar_reports
     if info.not_selected:
         counters["rejected_not_selected_offline"] = info.not_selected
-    return RunResult(steps=steps, counters=counters, info=info, profile_name=profile.name)
+    return RunResult(
+        steps=steps, counters=counters, info=info, profile_name=profile.name, status=est.status()
+    )

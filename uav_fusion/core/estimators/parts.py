@@ -38,6 +38,7 @@ import numpy.typing as npt
 from uav_fusion.core.estimators.imm import ImmFilter
 from uav_fusion.core.estimators.kalman import CvFilter, MotionFilter, PackedR, expand_upper, pack_r
 from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
+from uav_fusion.core.estimators.registration import Registration
 from uav_fusion.core.estimators.steps import nis_gate
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.profiles.settings import ScoreConfig
@@ -110,9 +111,7 @@ class PolarRadarR:
     low_el_gain: float = 0.0
     low_el_deg: float = 4.0
     # (radar east, north, up, floor^2, sigma_range^2): read once per report
-    _consts: tuple[float, float, float, float, float] = field(
-        init=False, repr=False, compare=False
-    )
+    _consts: tuple[float, float, float, float, float] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         e0, n0, u0 = self.radar_enu
@@ -247,9 +246,7 @@ def packed_to_array(r: PackedR) -> FloatArray:
     if len(r) == 3:
         return np.array([[r[0], r[1]], [r[1], r[2]]], dtype=float)
     if len(r) == 6:
-        return np.array(
-            [[r[0], r[1], r[2]], [r[1], r[3], r[4]], [r[2], r[4], r[5]]], dtype=float
-        )
+        return np.array([[r[0], r[1], r[2]], [r[1], r[3], r[4]], [r[2], r[4], r[5]]], dtype=float)
     raise ValueError(f"packed covariance must have 3 or 6 values, got {len(r)}")
 
 
@@ -379,12 +376,14 @@ def radar_model_from_profile(profile: Profile, site: Site) -> RadarRModel:
     return FixedRadarR(pack_r(profile.r_radar))
 
 
-def alignment_from_profile(profile: Profile, site: Site) -> RadarAlignment | None:
-    """The radar's misalignment correction (``measurement.radar.az_bias_deg`` /
-    ``el_bias_deg``), or None when both are 0."""
-    if not (profile.radar_az_bias_deg or profile.radar_el_bias_deg):
+def alignment_from_site(site: Site, az_deg: float | None = None) -> RadarAlignment | None:
+    """The radar's misalignment correction: the site file's calibration (``az_deg``: another
+    azimuth, e.g. an online estimate), or None when there is nothing to correct."""
+    cal = site.radar.calibration
+    az = cal.az_bias_deg if az_deg is None else az_deg
+    if not (az or cal.el_bias_deg):
         return None
-    return RadarAlignment(site.radar.enu, profile.radar_az_bias_deg, profile.radar_el_bias_deg)
+    return RadarAlignment(site.radar.enu, az, cal.el_bias_deg)
 
 
 def rf_model_from_profile(profile: Profile) -> RfRModel:
@@ -463,8 +462,10 @@ class RadarFront:
     """
 
     def __init__(self, profile: Profile, site: Site, cfg: ScoreConfig) -> None:
+        self.site = site
         self.radar_r = radar_model_from_profile(profile, site)
-        self.align = alignment_from_profile(profile, site)
+        self.align = alignment_from_site(site)
+        self.registration = Registration(site.radar.enu, site.radar.calibration)
         r_obj = self.radar_r
         self.extra_var = 0.0
         if isinstance(r_obj, PolarRadarR):
@@ -477,6 +478,33 @@ class RadarFront:
         self.radar_pos: tuple[float, float, float] = tuple(  # type: ignore[assignment]
             float(v) for v in site.radar.enu
         )
+
+    def register(self, t: float, e: float, n: float, var_m2: float, obj: RadarObject) -> None:
+        """An RF fix at (``e``, ``n``) credited to ``obj``, the object the UAV track follows:
+        the registration's measurement of the mount's azimuth misalignment; the correction of
+        the next reports follows the new estimate."""
+        kf = obj.kf
+        if kf is None:
+            return
+        dt = t - obj.kf_t
+        x = kf.x
+        oe, on = x[0] + dt * x[3], x[1] + dt * x[4]
+        # the object's variance across the line of sight from the radar, predicted to t
+        rx, ry = self.site.radar.enu[0], self.site.radar.enu[1]
+        rho = math.hypot(oe - rx, on - ry) or 1.0
+        u = ((on - ry) / rho, -(oe - rx) / rho)
+        p = expand_upper(kf.P)
+        pe = p[0, 0] + 2.0 * dt * p[0, 3] + dt * dt * p[3, 3]
+        pn = p[1, 1] + 2.0 * dt * p[1, 4] + dt * dt * p[4, 4]
+        pen = p[0, 1] + dt * (p[0, 4] + p[3, 1]) + dt * dt * p[3, 4]
+        across = u[0] * u[0] * pe + 2.0 * u[0] * u[1] * pen + u[1] * u[1] * pn
+        reg = self.registration
+        if reg.pair((oe, on), (e, n), var_m2, float(max(across, 0.0))):
+            self.align = alignment_from_site(self.site, reg.az_deg)
+
+    def status(self) -> dict[str, object]:
+        """The radar's registration, for /diagnostics."""
+        return self.registration.status()
 
     def reports(self, frame: RadarFrame) -> tuple[list[int], list[Report]]:
         """The indices of the frame's non-finite reports, and every finite report (aligned,

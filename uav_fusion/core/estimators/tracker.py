@@ -18,10 +18,13 @@ Per radar frame (all reports share one time):
    track's last velocity and RCS are coasts (``coast``, with
    ``association.object.skip_radar_coasts``);
 4. the follower decides which candidate updates the track, or starts one
-   (:mod:`~uav_fusion.core.estimators.follow`).
+   (:mod:`~uav_fusion.core.estimators.follow`), a restart only where the physical gates allow
+   (:mod:`~uav_fusion.core.estimators.gates`).
 
-An RF fix (``ok`` attempts only) credits every radar object it agrees with, then is gated and
-fused with its CEP-based R (or coasts); without any track it starts a tentative track that
+An RF fix (``ok`` attempts only) credits every radar object it agrees with (and, credited to
+the followed object, registers the radar: :mod:`~uav_fusion.core.estimators.registration`),
+then is gated and fused with its CEP-based R (or coasts; or, if it would move the track far,
+is held for a second fix: the physical gates); without any track it starts a tentative track that
 needs M of N hits (NIS gate and speed bound) to be confirmed, as in the paper profile.
 
 Every report and fix yields exactly one :class:`~uav_fusion.core.estimators.steps.
@@ -41,8 +44,15 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimators.follow import RadarFollower
+from uav_fusion.core.estimators.gates import PhysicalGates, rf_move
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
-from uav_fusion.core.estimators.kalman import MotionFilter, PackedR, expand_cov3, expand_upper
+from uav_fusion.core.estimators.kalman import (
+    UPPER_INDEX,
+    MotionFilter,
+    PackedR,
+    expand_cov3,
+    expand_upper,
+)
 from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.estimators.parts import (
     MofN,
@@ -74,6 +84,7 @@ _NAN_STATE = _pack(*(math.nan,) * 27)
 # a filter's (x, P) lists with their packed bytes, mode probabilities and effective q
 _Packed = tuple[object, object, bytes, tuple[float, ...], tuple[float, float, float]]
 
+
 class TrackerStep(Step):
     """A :class:`Step` with the measurement, its object's UAV score, the robust weight, the
     IMM mode probabilities and the track segment (a new one starts at every track start)."""
@@ -81,23 +92,11 @@ class TrackerStep(Step):
     __slots__ = ("mode_probs", "q_eff", "score", "segment", "weight", "z")
 
     def __init__(
-        self,
-        t: float,
-        source: str,
-        status: str,
-        reason: str | None,
-        nis: float | None,
-        state: bytes,
-        dim: int,
-        track_id: int | None,
-        seq: int,
-        z: tuple[float, ...],
-        score: float | None,
-        weight: float | None,
-        mode_probs: tuple[float, ...],
-        segment: int,
+        self, t: float, source: str, status: str, reason: str | None, nis: float | None,
+        state: bytes, dim: int, track_id: int | None, seq: int, z: tuple[float, ...],
+        score: float | None, weight: float | None, mode_probs: tuple[float, ...], segment: int,
         q_eff: tuple[float, float, float],
-    ) -> None:
+    ) -> None:  # fmt: skip
         self.t = t
         self.source = source
         self.status = status
@@ -119,22 +118,10 @@ class TrackerStep(Step):
     def with_state(self, state: bytes) -> TrackerStep:
         """A copy with another packed state (x then the upper triangle of P)."""
         return TrackerStep(
-            self.t,
-            self.source,
-            self.status,
-            self.reason,
-            self.nis,
-            state,
-            self.dim,
-            self.track_id,
-            self.seq,
-            self.z,
-            self.score,
-            self.weight,
-            self.mode_probs,
-            self.segment,
-            self.q_eff,
-        )
+            self.t, self.source, self.status, self.reason, self.nis, state, self.dim,
+            self.track_id, self.seq, self.z, self.score, self.weight, self.mode_probs,
+            self.segment, self.q_eff,
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -189,6 +176,7 @@ class Tracker:
         self._last_pos = (0.0, 0.0)
         self.consecutive_rejections = 0
         self.follow = RadarFollower(self)
+        self.gates = PhysicalGates(self.cfg, profile.max_speed_mps)
         self.segment = -1
         self._mofn: MofN | None = None
         self._last_hit = (0.0, 0.0, 0.0)
@@ -237,12 +225,12 @@ class Tracker:
         return frames_input(flight, self.profile)
 
     def status(self) -> dict[str, object]:
-        """The followed radar object, its UAV score and probability, and the time since the
-        last accepted measurement and the last 3D radar update."""
+        """The followed radar object, its UAV score and probability, the time since the
+        last accepted measurement and the last 3D radar update, and the radar's registration."""
         best = self.best_track()
         if best is None:
-            return {"track": "tentative" if self.active else "none"}
-        out: dict[str, object] = {"track": "confirmed"}
+            return {"track": "tentative" if self.active else "none", **self.front.status()}
+        out: dict[str, object] = {"track": "confirmed", **self.front.status()}
         ref = self.t
         if best.last_update_t is not None and ref is not None:
             out["since_last_accepted_s"] = f"{ref - best.last_update_t:.3f}"
@@ -397,6 +385,8 @@ class Tracker:
         self.last_3d_t = None
         self.last_radar_t = None
         self._last_pos = (x[0], x[1])
+        if not tentative:
+            self.gates.confirmed_state(t, x, float(P[2, 2]))
 
     def _confirmed_status(self) -> tuple[str, str | None]:
         reason = self._pending_reset
@@ -472,8 +462,10 @@ class Tracker:
         self._count(f"updated_{source}")
         f = self.filter
         if f is not None:
-            m = f.mean()[0]
+            m, pm = f.mean()
             self._last_pos = (m[0], m[1])
+            if self.confirmed:
+                self.gates.confirmed_state(t, m, pm[UPPER_INDEX[2][2]])
         self.consecutive_rejections = 0
         self.last_update_t = t
         return self._step(t, source, UPDATED, None, nis, z, track_id, score, weight)
@@ -514,7 +506,11 @@ class Tracker:
         if coarse and not (a.cep is not None and a.cep <= self.cfg.rf_support_max_cep_m):
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         r = self.rf_r.r_for(a.cep, a.valid_sensors)
-        self.objects.rf_fix(t, a.e, a.n, 0.5 * (r[0] + r[2]))
+        var = 0.5 * (r[0] + r[2])
+        self.objects.rf_fix(t, a.e, a.n, var)
+        obj = self.objects.credited
+        if obj is not None and self.confirmed and obj.id == self.followed:
+            self.front.register(t, a.e, a.n, var, obj)
         if coarse:
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
         if not self._advance(t):
@@ -529,6 +525,10 @@ class Tracker:
         self._hold_vz(t, f)
         nis = f.nis(z, r)
         if nis <= self._g2:
+            if not self.gates.rf_move_allowed(t, a.e, a.n, var, rf_move(f, z, r)):
+                # far from the track: held until a second fix agrees (gates.py)
+                self._count("rf_held")
+                return [self._step(t, RF, DISCARDED, "held", nis, z, None)]
             w = self.robust.weight(nis, 2)
             f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             return [self._used(t, RF, nis, z, None, None, w)]

@@ -87,8 +87,6 @@ class Profile:
     radar_floor_m: float = 0.0
     radar_low_el_gain: float = 0.0
     radar_low_el_deg: float = 4.0
-    radar_az_bias_deg: float = 0.0  # mounting misalignment, corrected on every report
-    radar_el_bias_deg: float = 0.0
     rf_model: str = "fixed"  # fixed (r_rf) | cep
     rf_cep_scale: float = 1.0
     rf_floor_m: float = 5.0
@@ -282,14 +280,16 @@ def _imm_fields(doc: dict[str, Any], model: str, at: Callable[[str], str]) -> di
     present, imm = _lookup(doc, "motion.imm")
     if model != "imm":
         if present and imm:
-            raise ConfigError(f"{at('motion.imm')}: motion.imm is set but motion.model is "
-                              f"{model!r}")
+            raise ConfigError(
+                f"{at('motion.imm')}: motion.imm is set but motion.model is {model!r}"
+            )
         return {}
     out: dict[str, Any] = {}
     qs = _lookup(doc, "motion.imm.q")[1]
     if not isinstance(qs, list) or len(qs) < 2:
-        raise ConfigError(f"{at('motion.imm.q')}: motion.imm.q must list one q per mode "
-                          "(at least 2)")
+        raise ConfigError(
+            f"{at('motion.imm.q')}: motion.imm.q must list one q per mode (at least 2)"
+        )
     for path in _IMM:
         has, raw = _lookup(doc, path)
         if has:

@@ -153,12 +153,6 @@ _MEASUREMENT = (
            bounds=">= 0", fit=TUNED),
         _k("low_el_deg", "radar_low_el_deg", NUMBER, PHYSICAL, "the elevation scale of the "
            "ground-multipath term", unit="deg", bounds="> 0"),
-        _k("az_bias_deg", "radar_az_bias_deg", NUMBER, FITTED, "mounting misalignment: every "
-           "report is turned back by this in azimuth (clockwise from north)", unit="deg",
-           bounds="[-10, 10]", fit="uav_fusion calibrate F1 F2 ..."),
-        _k("el_bias_deg", "radar_el_bias_deg", NUMBER, FITTED, "mounting misalignment: every "
-           "report is lowered by this in elevation", unit="deg", bounds="[-10, 10]",
-           fit="uav_fusion calibrate F1 F2 ..."),
     ),
     _k("measurement.rf.R", "r_rf", MATRIX, FITTED, "RF covariance (east, north); with model "
        "cep only for fixes without a CEP", unit="m^2", size=2,

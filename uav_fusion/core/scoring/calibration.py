@@ -36,6 +36,7 @@ from uav_fusion.core.scoring.metrics import (
     interpolate_truth,
     position_errors,
 )
+from uav_fusion.core.site import RadarCalibration
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -202,8 +203,8 @@ class AngleResiduals:
 @dataclass(frozen=True)
 class RadarAlignment:
     """The radar's mounting misalignment estimated against truth: the median azimuth and
-    elevation residual of the UAV's radar reports (``measurement.radar.az_bias_deg`` /
-    ``el_bias_deg`` of a tracker profile correct it)."""
+    elevation residual of the UAV's radar reports (the site file's ``radar.calibration``
+    corrects it: :func:`site_calibration`)."""
 
     az_bias_deg: float
     el_bias_deg: float
@@ -299,7 +300,42 @@ def format_alignment(al: RadarAlignment | None, hint: bool = True) -> str:
     if not hint:
         return text + "."
     return (
-        text + ". A tracker profile corrects it with measurement.radar.az_bias_deg / el_bias_deg."
+        text + ". The site file's radar.calibration corrects it "
+        "(uav_fusion calibrate --write-site FILE writes it)."
+    )
+
+
+#: Reports of one radar track are correlated over seconds: at ~4 reports a second, about this
+#: many reports make one independent measurement of an angle (for the standard error below).
+CORRELATED_REPORTS = 20
+
+
+def site_calibration(
+    al: RadarAlignment, residuals: list[AngleResiduals], note: str = ""
+) -> RadarCalibration:
+    """The site file's calibration from a pooled alignment: the pooled medians, and their
+    standard errors (from the spread of the flights' medians with several flights, else from
+    the spread of the reports, counting ``CORRELATED_REPORTS`` reports as one)."""
+
+    def sigma(values: list[FloatArray]) -> float:
+        if len(values) >= 2:
+            med = [float(np.median(v)) for v in values]
+            return float(np.std(med, ddof=1) / np.sqrt(len(med)))
+        v = np.concatenate(values)
+        mad = float(np.median(np.abs(v - np.median(v))))
+        n_eff = max(1.0, v.size / CORRELATED_REPORTS)
+        # the standard error of a median: 1.2533 sigma / sqrt(n); sigma from the MAD
+        return 1.2533 * 1.4826 * mad / float(np.sqrt(n_eff))
+
+    used = [r for r in residuals if r.az_deg.size]
+    if not used:
+        raise ValueError("no UAV report near truth: nothing to calibrate")
+    return RadarCalibration(
+        az_bias_deg=al.az_bias_deg,
+        el_bias_deg=al.el_bias_deg,
+        az_sigma_deg=max(sigma([r.az_deg for r in used]), 0.01),
+        el_sigma_deg=max(sigma([r.el_deg for r in used]), 0.01),
+        note=note[:200],
     )
 
 

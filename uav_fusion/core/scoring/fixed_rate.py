@@ -31,7 +31,11 @@ Per flight, and pooled over flights (:func:`pool`):
 * what the gross errors are (per flight): ``gross_vertical_pct``, the share of gross epochs
   whose vertical error exceeds the horizontal one, ``gross_age_p50_s``, the median age of
   the last accepted measurement at them (a long coast on the CV prediction), and
-  ``gross_rf_pct``, the share of them whose last accepted measurement was an RF fix.
+  ``gross_rf_pct``, the share of them whose last accepted measurement was an RF fix;
+* ``longest_gross_s``: the longest **gross episode**, a run of consecutive covered airborne
+  epochs whose error exceeds ``episode_error_m`` (300 m), in seconds (epochs x grid step;
+  an epoch without a published track or not airborne ends it; 0 without one). Pooled: the
+  longest of any flight, and ``flight_mean_max_m``, the largest per-flight mean error.
 """
 
 from __future__ import annotations
@@ -209,6 +213,7 @@ class ScoreSettings:
     observable_window_s: float = 2.0
     max_truth_gap_s: float = 2.0
     nees_probability: float = 0.95  # two-sided bounds of the per-epoch NEES
+    episode_error_m: float = 300.0  # a gross episode: consecutive epochs with a larger error
 
     def nees_bounds(self, dof: int = 3) -> tuple[float, float]:
         a = (1.0 - self.nees_probability) / 2.0
@@ -259,6 +264,7 @@ class GridSamples:
     ttf_s: float
     restarts: int
     observable_startup: int = 0  # radar-observable epochs before the first tracked one
+    longest_gross_s: float = 0.0  # the longest gross episode (s)
 
 
 @dataclass(frozen=True)
@@ -289,6 +295,10 @@ class GridScore:
     gross_rf_pct: float  # share of gross epochs whose last accepted measurement was RF
     # radar-observable coverage from each flight's first tracked airborne epoch on
     observable_after_start_pct: float = math.nan
+    # the longest gross episode (error > episode_error_m) of any flight, and the largest
+    # per-flight mean error
+    longest_gross_s: float = math.nan
+    flight_mean_max_m: float = math.nan
 
     def as_dict(self) -> dict[str, float | int]:
         return asdict(self)
@@ -385,6 +395,8 @@ def score_grid(
         first = int(tracked[0]) if tracked.size else grid.t.size
         n_start = int(np.count_nonzero(obs[:first]))
 
+    over = np.zeros(grid.t.size, dtype=bool)
+    over[np.flatnonzero(cov)] = err > s.episode_error_m
     ttf = math.nan
     if air_idx.size:
         t_air = grid.t[air_idx[0]]
@@ -405,7 +417,16 @@ def score_grid(
         ttf_s=ttf,
         restarts=grid.restarts,
         observable_startup=n_start,
+        longest_gross_s=longest_run(over) / grid.frequency_hz,
     )
+
+
+def longest_run(flags: npt.NDArray[np.bool_]) -> int:
+    """The length of the longest run of consecutive true values (0 without one)."""
+    x = np.concatenate(([0], np.asarray(flags, dtype=np.int8), [0]))
+    d = np.diff(x)
+    starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    return int((ends - starts).max()) if starts.size else 0
 
 
 def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) -> GridScore:
@@ -453,6 +474,10 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
         gross_rf_pct=_pct(int(np.count_nonzero(rf_last[gross])), n_gross),
         observable_after_start_pct=(
             _pct(n_obs_cov, n_obs - n_obs_start) if labelled else nan
+        ),
+        longest_gross_s=max((x.longest_gross_s for x in samples), default=nan),
+        flight_mean_max_m=max(
+            (float(x.errors.mean()) for x in samples if x.errors.size), default=nan
         ),
     )
 

@@ -77,6 +77,7 @@ class RadarModel:
     snr_ref_range_m: float = 1000.0
     detect_threshold_db: float = 13.0  # SNR needed for a detection (Pfa ~1e-6)
     detect_noise_db: float = 1.5  # per-look fluctuation of the SNR besides the RCS draw
+    pd_max: float = 1.0  # a look above the threshold is detected with this probability
     rcs_median_m2: float = 0.07  # lognormal RCS per look
     rcs_sigma_ln: float = 0.85
     rcs_min_m2: float = 0.0066
@@ -123,6 +124,7 @@ class RfModel:
     max_residual_m: float = 1500.0  # RMS TDOA residual (m) above which a fix is rejected
     search_margin_m: float = 3000.0  # the solver searches the sensors' box widened by this
     max_solution_range_m: float = 6000.0  # a solution farther from the sensors is a failure
+    cep_nlos_weight: float = 0.0  # share of the NLOS excess-path error the reported CEP includes
 
 
 @dataclass(frozen=True)
@@ -374,11 +376,12 @@ def twin_config_from_dict(doc: Any, source: Path | None = None) -> TwinConfig:
         seed=seed,
         source=source,
     )
-    _validate(cfg, src)
+    validate_twin_config(cfg, src)
     return cfg
 
 
-def _validate(cfg: TwinConfig, src: str) -> None:
+def validate_twin_config(cfg: TwinConfig, src: str) -> None:
+    """Stop with a ConfigError naming ``src`` and the key when ``cfg`` is inconsistent."""
     positive = {
         "dynamics.dt_s": cfg.dynamics.dt_s,
         "dynamics.accel_max_mps2": cfg.dynamics.accel_max_mps2,
@@ -395,6 +398,12 @@ def _validate(cfg: TwinConfig, src: str) -> None:
     for key, value in positive.items():
         if value <= 0:
             raise ConfigError(f"{src}: {key} must be > 0, got {value}")
+    if not 0.0 < cfg.radar.pd_max <= 1.0:
+        raise ConfigError(f"{src}: radar.pd_max must lie in (0, 1], got {cfg.radar.pd_max}")
+    if not 0.0 <= cfg.rf.cep_nlos_weight <= 1.0:
+        raise ConfigError(
+            f"{src}: rf.cep_nlos_weight must lie in [0, 1], got {cfg.rf.cep_nlos_weight}"
+        )
     if cfg.rf.interval_jitter_s >= cfg.rf.interval_s:
         raise ConfigError(f"{src}: rf.interval_jitter_s must be smaller than rf.interval_s")
     if cfg.birds.members_min < 1 or cfg.birds.members_max < cfg.birds.members_min:

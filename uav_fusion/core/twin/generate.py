@@ -23,6 +23,7 @@ from uav_fusion.core.twin.config import RfModel, TwinConfig
 from uav_fusion.core.twin.radar_model import SimRadarFrame, SimTrackReport, simulate_radar
 from uav_fusion.core.twin.rf_model import SimRfAttempt, simulate_rf
 from uav_fusion.core.twin.trajectory import Emitter, FlightPlan, Trajectory, fly
+from uav_fusion.core.twin.worlds import World, WorldFamily, apply_config, apply_site, draw_world
 from uav_fusion.core.twin.writers import radar_line_layout
 
 FloatArray = npt.NDArray[np.float64]
@@ -98,6 +99,7 @@ class TwinFlight:
     radar_sim: tuple[SimRadarFrame, ...]
     scene_scale: float = 1.0  # the radar scene's rate multiplier used
     others: tuple[OtherUav, ...] = ()  # the other UAVs of a multi-UAV flight
+    world: World | None = None  # the drawn world (``config`` and ``site`` have it applied)
 
     @property
     def start_datetime(self) -> datetime:
@@ -266,11 +268,14 @@ def generate_twin(
     radar_tower: str | None = None,
     sensors: list[str] | None = None,
     scene_scale: float | None = None,
+    world: WorldFamily | None = None,
 ) -> TwinFlight:
     """Simulate one flight. Deterministic for a given (site, config, plan, seed, options).
 
     ``scene_scale`` multiplies the rates of the radar scene's clutter sites, vehicles and
-    bird flocks (default: the plan's ``scene_scale``, 1 unless the plan sets it).
+    bird flocks (default: the plan's ``scene_scale``, 1 unless the plan sets it). ``world``:
+    a world family; the flight's physics are drawn from it with the seed
+    (:mod:`uav_fusion.core.twin.worlds`) and applied to ``config`` and the radar site.
     """
     seed = config.seed if seed is None else seed
     if seed < 0:
@@ -278,6 +283,11 @@ def generate_twin(
     if duration_s is not None and not (10.0 <= duration_s <= 6 * 3600.0):
         raise ConfigError(f"duration must lie in [10 s, 6 h], got {duration_s}")
     used_site = site_with_sensors(site, plan, radar_tower, sensors)
+    drawn = None
+    if world is not None:
+        drawn = draw_world(world, seed, plan.name)
+        config = apply_config(drawn, config)
+        used_site = dataclasses.replace(used_site, radar=apply_site(drawn, used_site.radar))
     start_unix = parse_utc(config.recording.start_utc)
     root = np.random.SeedSequence(seed)
     s_traj, s_truth, s_radar, s_rf, s_outage = root.spawn(5)
@@ -360,6 +370,7 @@ def generate_twin(
             OtherUav(p.vehicle, p, tr, tl)
             for p, tr, tl in zip(plans[1:], trajs[1:], truths[1:], strict=True)
         ),
+        world=drawn,
     )
 
 

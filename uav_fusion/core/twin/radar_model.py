@@ -261,6 +261,8 @@ class _Sensor:
         )
         if snr_db < cfg.detect_threshold_db:
             return None
+        if cfg.pd_max < 1.0 and float(r_det.random()) >= cfg.pd_max:
+            return None  # a scan loss (beam schedule, interference): drawn only when modelled
         mp = 1.0 + cfg.multipath_gain * math.exp(-abs(el) / cfg.multipath_el_deg)
         # thermal angle noise of a monopulse measurement grows as the SNR falls
         th = cfg.angle_snr_deg / math.sqrt(10.0 ** (snr_db / 10.0))

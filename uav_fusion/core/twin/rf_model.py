@@ -135,6 +135,26 @@ def solve_tdoa_2d(
     return x, converged, cov, rms
 
 
+def excess_cov(
+    sensors: FloatArray, xy: FloatArray, height: float, mean_excess: FloatArray, cov: FloatArray
+) -> FloatArray:
+    """Mean-square error (2x2) of a 2D TDOA fix from the links' excess paths.
+
+    Each link's excess path is exponential with mean ``mean_excess[i]`` (so its second-moment
+    matrix is ``diag(mean^2) + mean mean^T``); the time differences against sensor 0 carry it
+    through the linearised least-squares solution ``cov J^T`` (``cov`` = (J^T J)^-1 at ``xy``).
+    """
+    p = np.array([xy[0], xy[1], height])
+    d = np.maximum(np.linalg.norm(sensors - p, axis=1), 1e-6)
+    g = (p[:2] - sensors[:, :2]) / d[:, None]
+    J = g[1:] - g[0]
+    m = np.asarray(mean_excess, dtype=float)
+    second = np.diag(m * m) + np.outer(m, m)
+    D = np.hstack([-np.ones((m.size - 1, 1)), np.eye(m.size - 1)])
+    A = cov @ J.T
+    return np.asarray(A @ (D @ second @ D.T) @ A.T, dtype=float)
+
+
 def simulate_rf(
     traj: Trajectory,
     site: Site,
@@ -225,6 +245,15 @@ def simulate_rf(
                 ok = True
                 e, n = float(xy[0]), float(xy[1])
                 c = cov * (2.0 * sigma_m**2)
+                if cfg.cep_nlos_weight > 0.0:
+                    mean_excess = np.where(
+                        nlos,
+                        cfg.nlos_excess_m + cfg.nlos_excess_per_km_m * dist / 1000.0,
+                        cfg.los_multipath_m,
+                    )
+                    c = c + cfg.cep_nlos_weight * excess_cov(
+                        S[order], xy, height, mean_excess[order], cov
+                    )
                 sx, sy = math.sqrt(max(c[0, 0], 0.0)), math.sqrt(max(c[1, 1], 0.0))
                 cep = 0.59 * (sx + sy)
                 rho = float(c[0, 1] / (sx * sy)) if sx > 0 and sy > 0 else 0.0

@@ -18,6 +18,8 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from uav_fusion.core.twin.worlds import WORLD_FILE, world_doc, write_world
+
 if TYPE_CHECKING:
     from uav_fusion.core.twin.generate import TwinFlight
 
@@ -244,6 +246,8 @@ def write_manifest(twin: TwinFlight, path: Path, names: dict[str, str]) -> None:
         "files": names,
         "counts": counts,
     }
+    if twin.world is not None:  # only then: a flight of the default twin keeps its manifest
+        doc["world"] = {"family": twin.world.family, "file": WORLD_FILE}
     path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
 
 
@@ -263,4 +267,8 @@ def write_twin(twin: TwinFlight, out_dir: str | Path) -> dict[str, Path]:
         write_truth(twin, paths[f"truth:{other.vehicle}"], other.vehicle)
     paths["manifest"] = out / MANIFEST
     write_manifest(twin, paths["manifest"], names)
+    if twin.world is not None:
+        paths["world"] = write_world(
+            world_doc(twin.world, twin.config, twin.site.radar), out / WORLD_FILE
+        )
     return paths

@@ -1,0 +1,237 @@
+"""Physical gates (core/estimators/gates.py): what may restart the UAV track after it is lost,
+and how far one RF fix may move a coasting track. Each rule has a hand case, and each case
+also runs with the rule switched off to show that it is the rule that decides."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_tracker import Scene
+
+from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.gates import FAR_SIGMAS, PhysicalGates
+from uav_fusion.core.estimators.offline import run_tracker
+from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+from uav_fusion.core.profiles.settings import ScoreConfig
+from uav_fusion.core.records import RadarFrame, RfAttempt
+from uav_fusion.core.site import Site, load_site
+
+GROUND_ID = 500
+LOST_AT = 100.0  # the UAV vanishes from both sensors
+
+
+@pytest.fixture(scope="module")
+def site() -> Site:
+    return load_site()
+
+
+class Loop(Scene):
+    """A slow loop ``radius`` from the radar at 50 m height."""
+
+    radius = 600.0
+
+    def uav(self, t: float) -> np.ndarray:
+        a = 0.02 * t * 400.0 / self.radius  # 8 m/s
+        return self.r0 + np.array([self.radius * math.cos(a), self.radius * math.sin(a), 50.0])
+
+
+class FarLoop(Loop):
+    """Beyond 1 km, where a coasting track is not held in the Doppler notch (its covariance
+    grows freely, so a fix far off can pass the statistical gate)."""
+
+    radius = 1200.0
+
+
+def _lost_uav(site: Site, seed: int = 3, rf_after: bool = False) -> Scene:
+    """The loop seen by radar and RF for 100 s, then by neither (or by RF only,
+    ``rf_after``)."""
+    sc = Loop(site, seed=seed)
+    sc.build(
+        200.0,
+        uav_visible=lambda t: t < LOST_AT,
+        rf_ok=lambda t: rf_after or t < LOST_AT,
+    )
+    return sc
+
+
+def _with_ground_object(
+    sc: Scene, at: np.ndarray, start: float, rf_from: float | None = None
+) -> list[RadarFrame | RfAttempt]:
+    """Add a stationary object on the ground at ``at`` (east, north), classed UAV (0.95)
+    from its first report at ``start``; RF fixes at it every 4 s from ``rf_from``."""
+    frames = []
+    for f in sc.frames:
+        if f.t >= start:
+            g = sc.report(f.t, GROUND_ID, np.array([at[0], at[1], 1.0]), 0.95, np.zeros(3),
+                          sd=3.0, rcs_dbsm=-12.0)  # fmt: skip
+            f = RadarFrame(f.t, (*f.tracks, g))
+        frames.append(f)
+    sc.frames = frames
+    if rf_from is not None:
+        k = 10_000
+        for t in np.arange(rf_from, sc.frames[-1].t, 4.0):
+            e, n = at[:2] + sc.rng.normal(0.0, 5.0, 2)
+            sc.fixes.append(RfAttempt(float(t) + 0.05, k, True, 0.0, 0.0, e, n, 8.0, 4, 4))
+            k += 1
+    return sc.stream()
+
+
+def _started_on(steps: list[TrackerStep], track_id: int) -> list[TrackerStep]:
+    return [s for s in steps if s.status in ("initialised", "reset") and s.track_id == track_id]
+
+
+def _far_point(sc: Scene, dist: float) -> np.ndarray:
+    """A point ``dist`` from where the UAV was lost, across the radar (900 m beyond it for
+    1500 m: inside the range gate, where new tracks start)."""
+    p = sc.uav(LOST_AT)[:2]
+    across = (sc.r0[:2] - p) / np.linalg.norm(p - sc.r0[:2])
+    return np.asarray(p + dist * across)
+
+
+def test_after_a_reset_a_ground_object_far_from_the_last_state_never_starts_the_track(
+    site: Site, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    sc = _lost_uav(site)
+    # 1.5 km from the last state; it appears 60 s later, when the UAV could be there (30 m/s)
+    stream = _with_ground_object(sc, _far_point(sc, 1500.0), start=LOST_AT + 60.0)
+    tr = Tracker(load_profile("tracker"), site)
+    steps = run_tracker(tr, stream)
+    assert tr.counters.get("reinit_max_coast") == 1 and tr.gates.airborne
+    assert not _started_on(steps, GROUND_ID)
+    assert tr.counters["init_refused_ground"] > 0
+    refused = [s for s in steps if s.track_id == GROUND_ID and s.reason == "ground"]
+    assert refused and refused[0].status == "discarded"
+    # the rule decides: without it, the young object, classed UAV, starts the track
+    monkeypatch.setattr(PhysicalGates, "grounded", lambda self, obj: False)
+    steps = run_tracker(Tracker(load_profile("tracker"), site), stream)
+    assert _started_on(steps, GROUND_ID)
+
+
+def test_radar_and_rf_agreeing_corroborate_a_ground_object(site: Site) -> None:
+    sc = _lost_uav(site)
+    at = _far_point(sc, 1500.0)
+    # the emitter is there (the UAV landed): an RF fix credited to the object corroborates it
+    stream = _with_ground_object(sc, at, start=LOST_AT + 60.0, rf_from=LOST_AT + 62.0)
+    tr = Tracker(load_profile("tracker"), site)
+    steps = run_tracker(tr, stream)
+    # the first fix starts a tentative RF track; the object inside its gate confirms it
+    assert tr.counters["init_refused_ground"] >= 1 and tr.counters["confirmed"] == 1
+    followed = [s for s in steps if s.updated and s.track_id == GROUND_ID]
+    assert followed and LOST_AT + 62.0 < followed[0].t < LOST_AT + 63.0
+
+
+def test_an_object_the_uav_cannot_have_reached_starts_the_track_only_once_it_could(
+    site: Site, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    sc = _lost_uav(site)
+    # an airborne object 1.5 km out appears 25 s after the loss: the UAV could be 30 m/s x
+    # (25 s + its last update before the loss) + 200 m away, about 950 m
+    at = _far_point(sc, 1500.0)
+    frames = []
+    for f in sc.frames:
+        if f.t >= LOST_AT + 25.0:
+            p = np.array([at[0] + 5.0 * (f.t - LOST_AT), at[1], 60.0])  # east at 5 m/s
+            g = sc.report(f.t, GROUND_ID, p, 0.95, np.array([5.0, 0.0, 0.0]), sd=3.0,
+                          rcs_dbsm=-12.0)  # fmt: skip
+            f = RadarFrame(f.t, (*f.tracks, g))
+        frames.append(f)
+    sc.frames = frames
+    tr = Tracker(load_profile("tracker"), site)
+    steps = run_tracker(tr, sc.stream())
+    assert tr.counters["init_refused_unreachable"] > 0
+    (start,) = _started_on(steps, GROUND_ID)
+    anchor_t = max(s.t for s in steps if s.t < LOST_AT + 1.0 and s.updated)
+    reach = 30.0 * (start.t - anchor_t) + 200.0
+    dist = math.dist(start.z[:2], sc.uav(anchor_t)[:2])
+    assert reach >= dist - 30.0  # it started once the UAV could be there ...
+    assert 30.0 * (start.t - 1.0 - anchor_t) + 200.0 < dist + 30.0  # ... and not long before
+    monkeypatch.setattr(PhysicalGates, "reachable", lambda self, t, e, n: True)
+    early = _started_on(run_tracker(Tracker(load_profile("tracker"), site), sc.stream()),
+                        GROUND_ID)  # fmt: skip
+    assert early and early[0].t < start.t - 5.0
+
+
+def test_the_reach_gate_at_its_edge() -> None:
+    gates = PhysicalGates(ScoreConfig(reach_margin_m=200.0), max_speed_mps=30.0)
+    assert gates.reachable(10.0, 5000.0, 0.0)  # no confirmed state yet: anywhere
+    gates.confirmed_state(0.0, [0.0, 0.0, 50.0, 0.0, 0.0, 0.0], 4.0)
+    assert gates.airborne
+    # 30 m/s x 10 s + 200 m = 500 m
+    assert gates.reachable(10.0, 0.0, 499.9) and not gates.reachable(10.0, 0.0, 500.1)
+    assert gates.reachable(10.0, 300.0, 399.9) and not gates.reachable(10.0, 300.0, 400.1)
+    assert PhysicalGates(ScoreConfig(reach_margin_m=0.0), 30.0).reachable(10.0, 1e6, 0.0)
+
+
+def test_the_takeover_reach_gate_at_its_edge(site: Site) -> None:
+    tr = Tracker(load_profile("tracker"), site)
+    assert tr.cfg.reach_margin_m == 200.0 and tr.profile.max_speed_mps == 30.0
+    tr._last_pos, tr.last_update_t = (100.0, -50.0), 20.0
+    # a takeover candidate 30 m/s x 10 s + 200 m from the last update
+    ok = tr.follow._reachable
+    assert ok(30.0, 100.0 + 499.9, -50.0, 200.0) and not ok(30.0, 100.0 + 500.1, -50.0, 200.0)
+
+
+def _coast_then_fix(
+    site: Site, off_m: float, after_s: float, second: bool
+) -> tuple[Tracker, list[TrackerStep]]:
+    """Radar and RF for 100 s; then nothing for ``after_s``; then an RF fix ``off_m`` off
+    the UAV, further out (CEP 5 m), and with ``second`` another 4 s later at the same place."""
+    sc = FarLoop(site, seed=5)
+    sc.build(130.0, uav_visible=lambda t: t < LOST_AT, rf_ok=lambda t: t < LOST_AT)
+    t1 = LOST_AT + after_s
+    p = sc.uav(t1)
+    out = (p[:2] - sc.r0[:2]) / np.linalg.norm(p[:2] - sc.r0[:2])
+    at = p[:2] + off_m * out
+    sc.fixes.append(RfAttempt(t1, 90_000, True, 0.0, 0.0, *map(float, at), 5.0, 4, 4))
+    if second:
+        at2 = at + 3.0
+        sc.fixes.append(RfAttempt(t1 + 4.0, 90_001, True, 0.0, 0.0, *map(float, at2), 5.0, 4, 4))
+    tr = Tracker(load_profile("tracker"), site)
+    return tr, run_tracker(tr, sc.stream())
+
+
+def _moved(steps: list[TrackerStep], t0: float) -> float:
+    """How far the track's horizontal position jumped at the step after time ``t0``."""
+    before = [s for s in steps if s.t < t0 and s.x is not None][-1]
+    after = next(s for s in steps if s.t >= t0 and s.x is not None)
+    dt = after.t - before.t
+    pred = before.x[:2] + dt * before.x[3:5]
+    return float(np.linalg.norm(after.x[:2] - pred))
+
+
+def test_during_a_coast_one_rf_fix_500_m_off_does_not_move_the_track(
+    site: Site, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # 19 s into a coast the covariance is wide: the fix passes the statistical gate
+    tr, steps = _coast_then_fix(site, 500.0, 19.0, second=False)
+    (held,) = [s for s in steps if s.source == "rf" and s.reason == "held"]
+    assert held.t == LOST_AT + 19.0 and tr.counters["rf_held"] == 1
+    assert held.nis is not None and held.nis < 9.21  # inside the statistical gate ...
+    assert _moved(steps, LOST_AT + 19.0) <= 50.0  # ... yet the track does not follow it
+    # the rule decides: without it the fix pulls the coasting track hundreds of metres
+    monkeypatch.setattr(PhysicalGates, "rf_move_allowed", lambda self, *a: True)
+    _, free = _coast_then_fix(site, 500.0, 19.0, second=False)
+    assert _moved(free, LOST_AT + 19.0) > 200.0
+
+
+def test_a_second_fix_that_agrees_moves_the_track(site: Site) -> None:
+    _tr, steps = _coast_then_fix(site, 150.0, 10.0, second=True)
+    rf = [s for s in steps if s.source == "rf" and s.t > LOST_AT]
+    assert [(s.t - LOST_AT, s.status, s.reason) for s in rf] == [
+        (10.0, "discarded", "held"),
+        (14.0, "updated", None),
+    ]
+    assert _moved(steps, LOST_AT + 14.0) > 100.0
+
+
+def test_a_small_move_needs_no_second_fix() -> None:
+    gates = PhysicalGates(ScoreConfig(reach_margin_m=200.0), 30.0)
+    sd = 10.0
+    assert gates.rf_move_allowed(0.0, 0.0, 0.0, sd * sd, FAR_SIGMAS * sd - 0.1)
+    assert not gates.rf_move_allowed(1.0, 0.0, 0.0, sd * sd, FAR_SIGMAS * sd + 0.1)
+    # the held fix and one 4 s later: agreement within 3 sigmas of both + 30 m/s x 4 s
+    tol = FAR_SIGMAS * math.sqrt(2.0) * sd + 120.0
+    assert not gates.rf_move_allowed(5.0, tol + 1.0, 0.0, sd * sd, 500.0)  # held in its place
+    assert gates.rf_move_allowed(9.0, tol + 1.0 + tol - 1.0, 0.0, sd * sd, 500.0)
