@@ -24,6 +24,10 @@ EXECUTABLES: dict[str, list[str]] = {
     "radar_replay": [],
     "rf_replay": [],
     "truth_replay": [],
+    # no sensor at the default address: each keeps reconnecting
+    "radar_stream": [],
+    "rf_stream": [],
+    "truth_stream": [],
     "fusion_node": [],
     "evaluator_node": [],
     "bag_player": [str(ROOT / "bags" / "default_flight")],

@@ -17,6 +17,8 @@ COMMANDS: dict[str, str] = {
     "run": "run",
     "evaluate": "evaluate",
     "convert": "convert",
+    "emulate": "emulate",
+    "bag": "bag",
     "demo": "demo",
     "bench": "bench",
     "sweep": "sweep",

@@ -90,4 +90,4 @@ def test_the_suite_has_at_least_forty_cases() -> None:
     rows = table_rows()
     assert len(rows) >= 40
     areas = {cid.split("-")[0] for cid in rows}
-    assert areas == {"FILE", "MSG", "TIME", "PROC", "LOAD", "ACC", "FUZZ"}
+    assert areas == {"FILE", "MSG", "TIME", "PROC", "LIVE", "LOAD", "ACC", "FUZZ"}

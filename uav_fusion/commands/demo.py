@@ -83,6 +83,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "this rosbag2 MCAP directory",
     )
     parser.add_argument(
+        "--live",
+        action="store_true",
+        help="live input: the sensor emulator writes the flight's lines (at --rate, 20 when 0) "
+        "to radar_stream, rf_stream and truth_stream, which feed fusion_node and "
+        "evaluator_node; checked against the offline run (uav_fusion/commands/live.py)",
+    )
+    parser.add_argument(
+        "--live-via",
+        choices=("tcp", "udp", "file"),
+        default="tcp",
+        help="--live: how the emulator reaches the stream nodes (default tcp)",
+    )
+    parser.add_argument(
+        "--delay",
+        action="append",
+        metavar="SOURCE=S",
+        help="--live: the emulator sends SOURCE's lines S seconds late, e.g. rf=3 (repeatable)",
+    )
+    parser.add_argument(
+        "--jitter",
+        action="append",
+        metavar="SOURCE=S",
+        help="--live: a uniform jitter of +-S seconds on SOURCE's delay, e.g. rf=1",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="--live: seed of the emulator's jitter (default 0)"
+    )
+    parser.add_argument(
         "--multi",
         action="store_true",
         help="the multi-UAV graph: a twin flight with several UAVs (generated from "
@@ -163,11 +191,21 @@ def run(args: argparse.Namespace) -> int:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
     if args.multi:
+        if args.live:
+            raise ConfigError("--multi and --live do not go together")
         if args.bag:
             raise ConfigError("--multi replays a flight folder; it does not go with --bag")
         if args.out == DEFAULT_OUT:  # beside the single-UAV demo's report, not over it
             out = out / "multi"
         return _run_multi(args, out)
+    if args.live:
+        if args.bag:
+            raise ConfigError("--live emulates a flight folder; it does not go with --bag")
+        from uav_fusion.commands.live import run_live
+
+        if args.out == DEFAULT_OUT:  # beside the replayed demo's report, not over it
+            out = out / "live"
+        return run_live(args, flight_dir, out, _overrides(args, flight_dir, out))
     if args.bag:
         from uav_fusion.commands.playback import run_bag
 

@@ -106,7 +106,24 @@ def to_int(text: str) -> int | None:
     return int(x)
 
 
-class Source:
+class LinePolicy:
+    """What the line decoders of the three formats report to: a row that cannot be used
+    (:meth:`bad`), an optional field that cannot be read (:meth:`soft`) and a line that is
+    normal content but no record (:meth:`count`: radar status lines, truth rows without a
+    fix). :class:`Source` implements it for a file read in strict or lenient mode; the live
+    stream decoders (:mod:`uav_fusion.core.ingest.decode`) count and never raise."""
+
+    def bad(self, line: int, reason: str, what: str) -> None:
+        raise NotImplementedError
+
+    def soft(self, line: int, what: str) -> None:
+        raise NotImplementedError
+
+    def count(self, reason: str) -> None:
+        raise NotImplementedError
+
+
+class Source(LinePolicy):
     """The decoded lines of one input file plus the strict/lenient bookkeeping.
 
     Lines keep their 1-based numbers. A missing or unreadable file raises
@@ -187,6 +204,10 @@ class Source:
             self._soft_first = f"line {line}: {what}"
         self._soft["n"] += 1
 
+    def count(self, reason: str) -> None:
+        """A line that is normal content but no record (counted in both modes)."""
+        self.report.skip(reason)
+
     def empty(self, what: str = "empty file") -> None:
         """The file holds no data rows: raise (strict) or note it."""
         if self.strict:
@@ -209,7 +230,7 @@ class TimeOrder:
     exactly the same time is skipped as ``duplicate_time`` (strict mode raises for both).
     """
 
-    def __init__(self, src: Source) -> None:
+    def __init__(self, src: LinePolicy) -> None:
         self.src = src
         self.last_t = -math.inf
         self.last_line = 0

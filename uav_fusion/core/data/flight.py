@@ -130,6 +130,25 @@ def _find_rf(folder: Path, rf_file: str) -> Path:
     )
 
 
+def flight_files(
+    folder: str | Path,
+    *,
+    rf_file: str = "AADM.csv",
+    radar_glob: str = "radar_data_*.json",
+    truth_glob: str = "*vehicleOut.txt",
+) -> dict[str, Path]:
+    """The files :func:`load_flight` reads: ``rf``, ``radar`` and ``truth`` (the first UAV's),
+    found by the same rules (a missing or ambiguous file raises DataError)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DataError(folder, None, "flight folder not found")
+    return {
+        "radar": _find_one(folder, radar_glob, "radar", "radar_glob"),
+        "rf": _find_rf(folder, rf_file),
+        "truth": find_truth_files(folder, truth_glob)[0][1],
+    }
+
+
 def load_flight(
     folder: str | Path,
     site: Site | None = None,

@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from uav_fusion.core.data._source import T_MAX, T_MIN, Source, TimeOrder
+from uav_fusion.core.data._source import T_MAX, T_MIN, LinePolicy, Source, TimeOrder
 from uav_fusion.core.records import LoadReport, RadarFrame, RadarTrack
 from uav_fusion.core.site import Site
 
@@ -82,37 +83,41 @@ class _Track:
         self.ninl: int | None = None
 
 
-def read_radar_jsonl(
-    path: str | Path, site: Site, *, strict: bool = False
-) -> tuple[list[RadarFrame], LoadReport]:
-    """Read one radar JSON Lines log into UTC frames of ENU tracks.
+class RawFrame(NamedTuple):
+    """A decoded radar line before the ENU conversion."""
 
-    Line-level skip reasons (lenient mode): ``status`` (never raised), ``bad_json``,
-    ``truncated``, ``not_object``, ``no_track_data``, ``bad_track_data``, ``no_time``,
-    ``bad_time``, ``time_backwards``, ``duplicate_time``. Track-level: ``track_bad_value``,
-    ``track_no_lla``, ``track_nonfinite``, ``track_out_of_range``.
+    t: float
+    line: int
+    tracks: list[_Track]
+
+
+class RadarLines:
+    """Decodes radar lines one at a time, with ``policy``'s bookkeeping and ``order``'s
+    time-ordering policy: the file reader and the live stream decoder share it.
+
+    :meth:`decode` returns the frame a line carries (before the ENU conversion, which
+    :func:`radar_frames` does for many frames at once) or None for a status line or a line
+    that was skipped (counted by ``policy``).
     """
-    src = Source(path, strict)
-    rep = src.report
-    rep.rows = len(src.lines)
-    if not src.lines:
-        src.empty("empty file: no radar lines")
-        return [], src.finish()
-    offset = site.clock_offset_s("radar")
-    order = TimeOrder(src)
-    frames: list[tuple[float, int, list[_Track]]] = []
-    for line, text in src.lines:
+
+    def __init__(self, policy: LinePolicy, order: TimeOrder, offset_s: float) -> None:
+        self.policy = policy
+        self.order = order
+        self.offset_s = offset_s
+
+    def decode(self, line: int, text: str) -> RawFrame | None:
+        src = self.policy
         try:
             obj = json.loads(text, parse_int=_parse_int)
         except json.JSONDecodeError as exc:
             src.bad(line, "bad_json", f"invalid JSON: {exc.msg} at column {exc.colno}")
-            continue
+            return None
         except RecursionError:
             src.bad(line, "bad_json", "invalid JSON: nested too deeply")
-            continue
+            return None
         if not isinstance(obj, dict):
             src.bad(line, "not_object", f"a JSON {type(obj).__name__}, not an object")
-            continue
+            return None
         params = obj.get("params")
         if not isinstance(params, dict):
             params = {}
@@ -121,31 +126,34 @@ def read_radar_jsonl(
         elif "trackData" in params:
             tdata = params["trackData"]
         elif "error" in obj or "result" in obj:
-            rep.skip("status")
-            continue
+            src.count("status")
+            return None
         else:
             src.bad(line, "no_track_data", "object has neither trackData nor error/result")
-            continue
+            return None
         if tdata is None:
             tdata = []
         if not isinstance(tdata, list):
             src.bad(line, "bad_track_data", f"trackData is a {type(tdata).__name__}, not a list")
-            continue
+            return None
         t_file = _frame_time(obj, params)
         if t_file is None:
             src.bad(
                 line, "no_time", "frame has no finite params.globalTime (nor gpsWeek/gpsSeconds)"
             )
-            continue
-        t = t_file - offset
+            return None
+        t = t_file - self.offset_s
         if not T_MIN <= t_file <= T_MAX:
             src.bad(line, "bad_time", f"globalTime {t_file!r} is not a plausible unix time")
-            continue
-        if not order.accept(t, line):
-            continue
+            return None
+        if not self.order.accept(t, line):
+            return None
         tracks = [tr for k, raw in enumerate(tdata) if (tr := _track(src, line, k, raw))]
-        frames.append((t, line, tracks))
+        return RawFrame(t, line, tracks)
 
+
+def radar_frames(site: Site, frames: Sequence[RawFrame]) -> list[RadarFrame]:
+    """Decoded radar lines as frames of ENU tracks (one vectorised conversion for all)."""
     all_tracks = [tr for _, _, trs in frames for tr in trs]
     lat = np.array([tr.lat for tr in all_tracks], dtype=float)
     lon = np.array([tr.lon for tr in all_tracks], dtype=float)
@@ -177,12 +185,34 @@ def read_radar_jsonl(
             )
             j += 1
         out.append(RadarFrame(t=t, tracks=tuple(recs), line=line))
+    return out
+
+
+def read_radar_jsonl(
+    path: str | Path, site: Site, *, strict: bool = False
+) -> tuple[list[RadarFrame], LoadReport]:
+    """Read one radar JSON Lines log into UTC frames of ENU tracks.
+
+    Line-level skip reasons (lenient mode): ``status`` (never raised), ``bad_json``,
+    ``truncated``, ``not_object``, ``no_track_data``, ``bad_track_data``, ``no_time``,
+    ``bad_time``, ``time_backwards``, ``duplicate_time``. Track-level: ``track_bad_value``,
+    ``track_no_lla``, ``track_nonfinite``, ``track_out_of_range``.
+    """
+    src = Source(path, strict)
+    rep = src.report
+    rep.rows = len(src.lines)
+    if not src.lines:
+        src.empty("empty file: no radar lines")
+        return [], src.finish()
+    dec = RadarLines(src, TimeOrder(src), site.clock_offset_s("radar"))
+    raw = [f for line, text in src.lines if (f := dec.decode(line, text)) is not None]
+    out = radar_frames(site, raw)
     rep.used = len(out)
-    rep.notes.append(f"{len(out)} frames, {len(all_tracks)} tracks")
+    rep.notes.append(f"{len(out)} frames, {sum(len(f.tracks) for f in out)} tracks")
     return out, src.finish()
 
 
-def _track(src: Source, line: int, k: int, raw: Any) -> _Track | None:
+def _track(src: LinePolicy, line: int, k: int, raw: Any) -> _Track | None:
     """One track of a frame, or None (skipped and counted) if its position is unusable."""
     where = f"trackData[{k}]"
     if not isinstance(raw, dict):
@@ -238,7 +268,7 @@ def _track(src: Source, line: int, k: int, raw: Any) -> _Track | None:
 
 
 def _opt(
-    src: Source, line: int, where: str, raw: dict[str, Any], key: str, lo: float | None = None
+    src: LinePolicy, line: int, where: str, raw: dict[str, Any], key: str, lo: float | None = None
 ) -> float | None:
     v = raw.get(key)
     if v is None:

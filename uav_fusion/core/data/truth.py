@@ -19,11 +19,14 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from uav_fusion.core.data._source import (
+    LinePolicy,
     Source,
     TimeOrder,
     csv_fields,
@@ -64,6 +67,115 @@ def _triple(text: str) -> tuple[float, float, float] | None:
     return (float(vals[0] or 0.0), float(vals[1] or 0.0), float(vals[2] or 0.0))
 
 
+class RawFix(NamedTuple):
+    """A decoded truth row before the ENU conversion."""
+
+    t: float
+    lat: float
+    lon: float
+    alt: float
+    vel: tuple[float, float, float]
+    fix: int
+    sats: int
+    line: int
+
+
+class TruthLines:
+    """Decodes truth rows one at a time, with ``policy``'s bookkeeping and ``order``'s
+    time-ordering policy: the file reader and the live stream decoder share it.
+
+    :meth:`decode` returns the fix a row carries (before the ENU conversion, which
+    :func:`truth_fixes` does for many at once) or None for a row without a fix (counted as
+    ``no_fix``) or one that was skipped (counted by ``policy``). :attr:`kinds` counts the
+    timestamp kinds read (``wall``, ``zoned``, ``unix``), :attr:`fix_types` the fix types.
+    """
+
+    def __init__(self, policy: LinePolicy, order: TimeOrder, offset_s: float) -> None:
+        self.policy = policy
+        self.order = order
+        self.offset_s = offset_s
+        self.kinds: Counter[str] = Counter()
+        self.fix_types: Counter[int] = Counter()
+
+    def decode(self, line: int, text: str) -> RawFix | None:
+        src = self.policy
+        f, not_csv = csv_fields(text)
+        if f is None:
+            src.bad(line, "bad_csv", str(not_csv))
+            return None
+        if len(f) != len(COLUMNS):
+            src.bad(
+                line,
+                "bad_columns",
+                f"{len(f)} fields, expected {len(COLUMNS)} ({', '.join(COLUMNS)})",
+            )
+            return None
+        lon, lat, alt = to_float(f[1]), to_float(f[2]), to_float(f[3])
+        if lon is None or lat is None or alt is None:
+            src.bad(
+                line,
+                "bad_value",
+                f"lon/lat/alt {f[1].strip()!r}, {f[2].strip()!r}, {f[3].strip()!r} not numbers",
+            )
+            return None
+        fix = to_int(f[8])
+        if fix is None:
+            src.bad(line, "bad_value", f"gps_fix_type {f[8].strip()!r} is not an integer")
+            return None
+        if NO_FIX in (lon, lat, alt) or fix < MIN_FIX_TYPE:
+            src.count("no_fix")
+            return None
+        if not (math.isfinite(lon) and math.isfinite(lat) and math.isfinite(alt)):
+            src.bad(line, "nonfinite", f"lon/lat/alt {lon}, {lat}, {alt} not finite")
+            return None
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            src.bad(line, "out_of_range", f"lat/lon {lat}, {lon} out of range")
+            return None
+        parsed = parse_clock_time(f[7])
+        if parsed is None:
+            src.bad(line, "bad_time", f"timestamp {f[7].strip()!r} is not a plausible time")
+            return None
+        t = parsed[0] - (self.offset_s if parsed[1] != "zoned" else 0.0)
+        if not self.order.accept(t, line):
+            return None
+        vel = _triple(f[5])
+        if vel is None:
+            src.soft(line, f"velocity {f[5].strip()!r} is not a (vN,vE,vD) tuple")
+            vel = (math.nan, math.nan, math.nan)
+        sats = to_int(f[9])
+        if sats is None:
+            src.soft(line, f"num_sats {f[9].strip()!r} is not an integer")
+            sats = -1
+        self.kinds[parsed[1]] += 1
+        self.fix_types[fix] += 1
+        return RawFix(t, lat, lon, alt, vel, fix, sats, line)
+
+
+def truth_fixes(site: Site, kept: Sequence[RawFix]) -> list[TruthFix]:
+    """Decoded truth rows as ENU fixes (one vectorised conversion for all); the height is
+    ``site.takeoff_h`` + the row's relative altitude."""
+    lat_a = np.array([k.lat for k in kept], dtype=float)
+    lon_a = np.array([k.lon for k in kept], dtype=float)
+    h_a = site.takeoff_h + np.array([k.alt for k in kept], dtype=float)
+    e_a, n_a, u_a = site.to_enu(lat_a, lon_a, h_a)
+    return [
+        TruthFix(
+            t=k.t,
+            lat=k.lat,
+            lon=k.lon,
+            h=float(h_a[j]),
+            e=float(e_a[j]),
+            n=float(n_a[j]),
+            u=float(u_a[j]),
+            vel_ned=k.vel,
+            fix_type=k.fix,
+            num_sats=k.sats,
+            line=k.line,
+        )
+        for j, k in enumerate(kept)
+    ]
+
+
 def read_truth(
     path: str | Path, site: Site, *, strict: bool = False
 ) -> tuple[list[TruthFix], LoadReport]:
@@ -82,88 +194,14 @@ def read_truth(
         src.empty("empty file: no truth rows")
         return [], src.finish()
     offset = site.clock_offset_s("truth")
-    order = TimeOrder(src)
-    kinds: Counter[str] = Counter()
-    fix_types: Counter[int] = Counter()
-    nan3 = (math.nan, math.nan, math.nan)
-    kept: list[tuple[float, float, float, float, tuple[float, float, float], int, int, int]] = []
-    for line, text in src.lines:
-        f, not_csv = csv_fields(text)
-        if f is None:
-            src.bad(line, "bad_csv", str(not_csv))
-            continue
-        if len(f) != len(COLUMNS):
-            src.bad(
-                line,
-                "bad_columns",
-                f"{len(f)} fields, expected {len(COLUMNS)} ({', '.join(COLUMNS)})",
-            )
-            continue
-        lon, lat, alt = to_float(f[1]), to_float(f[2]), to_float(f[3])
-        if lon is None or lat is None or alt is None:
-            src.bad(
-                line,
-                "bad_value",
-                f"lon/lat/alt {f[1].strip()!r}, {f[2].strip()!r}, {f[3].strip()!r} not numbers",
-            )
-            continue
-        fix = to_int(f[8])
-        if fix is None:
-            src.bad(line, "bad_value", f"gps_fix_type {f[8].strip()!r} is not an integer")
-            continue
-        if NO_FIX in (lon, lat, alt) or fix < MIN_FIX_TYPE:
-            rep.skip("no_fix")
-            continue
-        if not (math.isfinite(lon) and math.isfinite(lat) and math.isfinite(alt)):
-            src.bad(line, "nonfinite", f"lon/lat/alt {lon}, {lat}, {alt} not finite")
-            continue
-        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
-            src.bad(line, "out_of_range", f"lat/lon {lat}, {lon} out of range")
-            continue
-        parsed = parse_clock_time(f[7])
-        if parsed is None:
-            src.bad(line, "bad_time", f"timestamp {f[7].strip()!r} is not a plausible time")
-            continue
-        t = parsed[0] - (offset if parsed[1] != "zoned" else 0.0)
-        if not order.accept(t, line):
-            continue
-        vel = _triple(f[5])
-        if vel is None:
-            src.soft(line, f"velocity {f[5].strip()!r} is not a (vN,vE,vD) tuple")
-            vel = nan3
-        sats = to_int(f[9])
-        if sats is None:
-            src.soft(line, f"num_sats {f[9].strip()!r} is not an integer")
-            sats = -1
-        kinds[parsed[1]] += 1
-        fix_types[fix] += 1
-        kept.append((t, lat, lon, alt, vel, fix, sats, line))
-
-    lat_a = np.array([k[1] for k in kept], dtype=float)
-    lon_a = np.array([k[2] for k in kept], dtype=float)
-    h_a = site.takeoff_h + np.array([k[3] for k in kept], dtype=float)
-    e_a, n_a, u_a = site.to_enu(lat_a, lon_a, h_a)
-    out = [
-        TruthFix(
-            t=k[0],
-            lat=k[1],
-            lon=k[2],
-            h=float(h_a[j]),
-            e=float(e_a[j]),
-            n=float(n_a[j]),
-            u=float(u_a[j]),
-            vel_ned=k[4],
-            fix_type=k[5],
-            num_sats=k[6],
-            line=k[7],
-        )
-        for j, k in enumerate(kept)
-    ]
+    dec = TruthLines(src, TimeOrder(src), offset)
+    kept = [k for line, text in src.lines if (k := dec.decode(line, text)) is not None]
+    out = truth_fixes(site, kept)
     rep.used = len(out)
-    if fix_types:
+    if dec.fix_types:
         rep.notes.append(
-            "fix types: " + ", ".join(f"{ft}×{c}" for ft, c in sorted(fix_types.items()))
+            "fix types: " + ", ".join(f"{ft}×{c}" for ft, c in sorted(dec.fix_types.items()))
         )
-    if kinds["unix"] and offset != 0.0:
-        rep.notes.append(unix_clock_note(kinds["unix"], "truth", offset))
+    if dec.kinds["unix"] and offset != 0.0:
+        rep.notes.append(unix_clock_note(dec.kinds["unix"], "truth", offset))
     return out, src.finish()

@@ -62,3 +62,26 @@ def uav_class_tracks(
     frames = list(frames)
     uav, _ = uav_track_ids(frames, min_mean_uav_prob)
     return [trk for frame in frames for trk in frame.tracks if trk.track_id in uav]
+
+
+class RunningUavClass:
+    """The per-track rule as a live stream can apply it: a report is the UAV's when the mean
+    UAV probability of its track *so far* (this report included) is at least the threshold
+    (a track without a finite probability yet counts as the UAV's). It looks only at the past,
+    so early reports of a track can be classed differently than by the offline rule, which
+    averages the whole flight (``radar_stream``'s ``radar/raw``)."""
+
+    def __init__(self, min_mean_uav_prob: float | None) -> None:
+        self.threshold = min_mean_uav_prob
+        self._sums: dict[int, float] = {}
+        self._counts: dict[int, int] = {}
+
+    def is_uav(self, trk: RadarTrack) -> bool:
+        p = trk.uav_prob
+        if p is not None and math.isfinite(p):
+            self._sums[trk.track_id] = self._sums.get(trk.track_id, 0.0) + p
+            self._counts[trk.track_id] = self._counts.get(trk.track_id, 0) + 1
+        if self.threshold is None:
+            return True
+        n = self._counts.get(trk.track_id, 0)
+        return n == 0 or self._sums[trk.track_id] / n >= self.threshold
