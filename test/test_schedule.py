@@ -103,3 +103,18 @@ def test_simulated_schedule_equals_feeding_a_pipeline_message_by_message(items) 
     key = [(s.t, s.status, repr(s.values)) for o in outs for s in o.steps]
     assert key == [(s.t, s.status, repr(s.values)) for o in got for s in o.steps]
     assert [g.k for o in outs for g in o.grid] == [g.k for o in got for g in o.grid]
+
+
+def test_the_nodes_arrival_log_has_one_row_per_radar_frame(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from uav_fusion.ros.fusion_input import ArrivalLog
+
+    # the paper's radar/pose brings a frame's candidates one message each, back to back
+    log = ArrivalLog(tmp_path / "arrivals.csv")
+    for it in items:
+        src = RADAR if not hasattr(it, "ok") else RF
+        for _ in range(3 if src == RADAR else 1):
+            log.add(src, it.t)
+    log.close()
+    assert log.rows == len(items)
+    back = read_schedule(log.path, items)
+    assert [id(it) for _, it in back] == [id(it) for it in items]

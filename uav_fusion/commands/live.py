@@ -325,8 +325,6 @@ def compare_offline(args: argparse.Namespace, flight_dir: Path, profile: str, li
     t0 = time.perf_counter()
     site = load_site(args.site)
     flight = load_flight(flight_dir, site)
-    if arrivals is not None:
-        arrivals = _one_row_per_frame(arrivals)
     ref, _ = evaluate_flight(flight, profile, site, arrivals=arrivals)
     same = True
     worst = 0.0
@@ -354,27 +352,3 @@ def compare_offline(args: argparse.Namespace, flight_dir: Path, profile: str, li
     print(f"demo: live: profile {name}: live and offline differ (largest difference in "
           f"mean/max {worst:.3g} m)", file=sys.stderr)
     return 1
-
-
-def _one_row_per_frame(path: Path) -> Path:
-    """The node's arrival schedule with one row per radar frame: the paper's input
-    (``radar/pose``) brings a frame's candidates as one message each, and the node logs each
-    (the offline schedule reader takes one row per frame). The first row of a stamp is kept."""
-    import csv
-
-    with path.open(newline="", encoding="utf-8") as fh:
-        rows = list(csv.reader(fh))
-    seen: set[str] = set()
-    kept = rows[:1]
-    for row in rows[1:]:
-        if row and row[0] == "radar":
-            if row[1] in seen:
-                continue
-            seen.add(row[1])
-        kept.append(row)
-    if len(kept) == len(rows):
-        return path
-    out = path.with_name(path.stem + "_frames.csv")
-    with out.open("w", newline="", encoding="utf-8") as fh:
-        csv.writer(fh).writerows(kept)
-    return out

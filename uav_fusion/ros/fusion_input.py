@@ -62,8 +62,16 @@ class ArrivalLog:
         self._w = csv.writer(self._fh)
         self._w.writerow(HEADER)
         self.rows = 0
+        self._last_radar: float | None = None
 
     def add(self, source: str, stamp: float) -> None:
+        """One input as it arrives; one row per radar frame (the paper's ``radar/pose``
+        brings a frame's candidates one message each, back to back: the first one's arrival
+        is the frame's)."""
+        if source == "radar":
+            if stamp == self._last_radar:
+                return
+            self._last_radar = stamp
         self._w.writerow((source, repr(stamp), repr(time.time())))
         self.rows += 1
 
