@@ -259,6 +259,9 @@ def test_parameters_validated_at_start_and_at_run_time(ctx: Context) -> None:
         FusionNode(context=ctx, parameter_overrides=[Parameter("reorder_window_s", value=-1.0)])
     with pytest.raises(ParamError, match="child_frame_id"):
         FusionNode(context=ctx, parameter_overrides=[Parameter("child_frame_id", value="")])
+    for lag in (0.0, -1.0):
+        with pytest.raises(ParamError, match="max_lag_s"):
+            FusionNode(context=ctx, parameter_overrides=[Parameter("max_lag_s", value=lag)])
     with pytest.raises(Exception, match="nope"):
         FusionNode(context=ctx, parameter_overrides=[Parameter("profile", value="nope")])
     node = FusionNode(context=ctx)
@@ -276,3 +279,4 @@ def test_main_exits_2_on_bad_parameter() -> None:
     from uav_fusion.nodes.fusion_node import main
 
     assert main(["fusion_node", "--ros-args", "-p", "reorder_window_s:=-2.0"]) == 2
+    assert main(["fusion_node", "--ros-args", "-p", "max_lag_s:=0.0"]) == 2

@@ -16,6 +16,7 @@ import yaml
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import Profile, load_profile, run_flight
 from uav_fusion.core.estimators.base import feed
+from uav_fusion.core.estimators.gates import PhysicalGates
 from uav_fusion.core.estimators.objects import ObjectTable
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
@@ -649,7 +650,7 @@ def _swap_scene(
 
 
 def test_a_radar_track_that_swaps_off_the_uav_is_left_for_the_uavs_new_track(
-    site: Site,
+    site: Site, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     swap_t = 120.0
     sc = _swap_scene(site, swap_t)
@@ -662,9 +663,15 @@ def test_a_radar_track_that_swaps_off_the_uav_is_left_for_the_uavs_new_track(
     assert not any(s.track_id == 10 for s in after if s.t >= first_new)
     late = [s for s in steps if s.counted and s.t > first_new + 2.0]
     assert late and max(sc.error(s) for s in late) < 40.0
-    # without the rule the track rides the swapped radar track away from the UAV
+    # without the rule the RF fixes, which go on from the UAV, end the track on the swapped
+    # radar track (gates.py: three agreeing fixes outside the gate) ...
     prof = load_profile("tracker")
     off = dataclasses.replace(prof, score=dataclasses.replace(prof.score, challenge_s=0.0))
+    rf_only = Tracker(off, site)
+    run_tracker(rf_only, sc.stream())
+    assert rf_only.counters.get("reinit_rf_disagrees", 0) >= 1
+    # ... and without either the track rides the swapped radar track away from the UAV
+    monkeypatch.setattr(PhysicalGates, "rf_outside", lambda self, *a: False)
     steps0 = run_tracker(Tracker(off, site), sc.stream())
     at = [s for s in steps0 if s.counted and swap_t + 20.0 <= s.t < swap_t + 21.0]
     assert at and min(sc.error(s) for s in at) > 100.0
@@ -694,10 +701,12 @@ def test_a_challenger_whose_radar_track_coasts_every_other_frame_still_takes_ove
 
 @pytest.mark.parametrize(("key", "value"), [("challenge_margin", 20.0), ("challenge_s", 1000.0)])
 def test_a_challenger_must_outscore_the_followed_object_by_the_margin_for_the_time(
-    site: Site, key: str, value: float
+    site: Site, key: str, value: float, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # the same swap: a margin no object reaches, or a time longer than the flight, and the
-    # track never leaves the swapped radar track
+    # track never leaves the swapped radar track (the RF rule of gates.py, which would end
+    # it, switched off)
+    monkeypatch.setattr(PhysicalGates, "rf_outside", lambda self, *a: False)
     sc = _swap_scene(site)
     prof = load_profile("tracker")
     strict = dataclasses.replace(prof, score=dataclasses.replace(prof.score, **{key: value}))

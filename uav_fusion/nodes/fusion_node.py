@@ -42,7 +42,7 @@ from uav_fusion.ros.app import run_node
 from uav_fusion.ros.conversions import ns_to_time
 from uav_fusion.ros.fusion_input import ArrivalLog, FusionInput, InputTopics
 from uav_fusion.ros.fusion_output import FusionOutput, OutputTopics, ViewSettings
-from uav_fusion.ros.params import Param, declare_all, not_empty
+from uav_fusion.ros.params import Param, declare_all, not_empty, positive
 from uav_fusion.ros.qos import stream_qos
 
 NODE_NAME = "fusion_node"
@@ -110,8 +110,8 @@ def fusion_params() -> list[Param]:
         Param(
             "max_lag_s", 10.0,
             "reorder_window_s 0: sensor seconds a measurement may arrive late and still be "
-            "fused exactly (older: dropped as late)",
-            lo=0.0, hi=3600.0,
+            "fused exactly (older: dropped as late); > 0",
+            lo=0.0, hi=3600.0, check=positive,
         ),
         Param(
             "arrivals_file", "",
