@@ -12,6 +12,7 @@ from sensor_msgs.msg import NavSatStatus
 from uav_fusion.core.records import RADAR, RF, Measurement, RfAttempt, TruthFix
 from uav_fusion.core.site import load_site
 from uav_fusion.ros import conversions as cv
+from uav_fusion.ros import odometry as od
 
 T0 = 1759866140.123456789  # a UTC time on the day of the real flights
 
@@ -116,8 +117,8 @@ def test_odometry_round_trip_keeps_blocks() -> None:
     A = rng.normal(size=(6, 6))
     P = A @ A.T
     x = rng.normal(size=6) * 100
-    msg = cv.state_to_odometry(T0, x, P, "enu_lw1", "uav")
-    st = cv.odometry_to_state(msg)
+    msg = od.state_to_odometry(T0, x, P, "enu_lw1", "uav")
+    st = od.odometry_to_state(msg)
     assert st.t == T0 and st.frame_id == "enu_lw1" and st.child_frame_id == "uav"
     assert np.array_equal(st.x, x)
     assert np.array_equal(st.P[:3, :3], P[:3, :3])
@@ -171,7 +172,7 @@ def test_scalar_covariance_check_decides_like_numpy() -> None:
 def test_odometry_from_values_equals_the_array_path() -> None:
     from uav_fusion.core.estimators import FusionEstimator, load_profile
     from uav_fusion.core.site import load_site
-    from uav_fusion.ros.conversions import odometry_from_values, state_to_odometry
+    from uav_fusion.ros.odometry import odometry_from_values, state_to_odometry
 
     est = FusionEstimator(load_profile("paper"), load_site())
     z0 = np.asarray(est.site.radar.enu) + 80.0

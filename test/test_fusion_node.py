@@ -27,6 +27,7 @@ from uav_fusion.core.records import RADAR, Measurement
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode
 from uav_fusion.ros import conversions as cv
+from uav_fusion.ros import odometry as od
 from uav_fusion.ros.params import ParamError
 from uav_fusion.ros.qos import stream_qos
 
@@ -153,7 +154,7 @@ def test_late_rf_is_reordered_and_output_equals_offline(
     res = h.flush()
     assert res.success
     h.spin_until(lambda: len(h.odom) == len(expected))
-    got = [cv.odometry_to_state(o) for o in h.odom]
+    got = [od.odometry_to_state(o) for o in h.odom]
     assert [g.t for g in got] == [e[0] for e in expected]
     assert np.max(np.abs(np.array([g.x for g in got]) - np.array([e[1] for e in expected]))) < 1e-9
     n_upd = sum(1 for e in expected if e[2])

@@ -32,6 +32,7 @@ from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 from uav_fusion.ros import conversions as cv
+from uav_fusion.ros import odometry as od
 from uav_fusion.ros.qos import stream_qos
 
 FRAME = "enu_lw1"
@@ -135,13 +136,13 @@ def test_live_tracker_equals_the_offline_run_and_its_grid(
     n_upd = sum(1 for s in est if s.updated)
     h.spin_until(lambda: len(h.updated) == n_upd and len(h.coasted) == len(est) - n_upd)
     got = sorted(
-        [cv.odometry_to_state(o) for o in h.updated + h.coasted], key=lambda g: g.t
+        [od.odometry_to_state(o) for o in h.updated + h.coasted], key=lambda g: g.t
     )
     assert [g.t for g in got] == [s.t for s in est]
     assert np.max(np.abs(np.array([g.x for g in got]) - np.array([s.x for s in est]))) < 1e-9
     # the fixed-rate output is the core grid of the same steps, epoch for epoch
     h.spin_until(lambda: len(h.odom) == len(expected_grid))
-    odom = [cv.odometry_to_state(o) for o in h.odom]
+    odom = [od.odometry_to_state(o) for o in h.odom]
     assert [o.t for o in odom] == [g.t for g in expected_grid]
     dx = np.array([o.x for o in odom]) - np.array([g.x for g in expected_grid])
     assert np.max(np.abs(dx)) < 1e-9
@@ -284,7 +285,7 @@ def test_live_fixed_lag_smoothing_equals_the_offline_one(
     h.spin_until(lambda: h.got() == len(frames) + len(attempts))
     h.fusion.flush()  # the end of the stream ends the last smoothing window
     h.spin_until(lambda: len(got) == len(smoothed))
-    live = [cv.odometry_to_state(o) for o in got]
+    live = [od.odometry_to_state(o) for o in got]
     assert [g.t for g in live] == [s.t for s in smoothed]
     dx = np.array([g.x for g in live]) - np.array([s.x for s in smoothed])
     assert np.max(np.abs(dx)) < 1e-9
@@ -314,7 +315,7 @@ def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
     h.spin_until(lambda: h.got() == len(frames) + len(attempts))
     h.fusion.flush()
     h.spin_until(lambda: len(got) == len(rows))
-    live = [(cv.time_from_stamp(m.header.stamp), m.child_frame_id, cv.odometry_to_state(m).x)
+    live = [(cv.time_from_stamp(m.header.stamp), m.child_frame_id, od.odometry_to_state(m).x)
             for m in got]  # fmt: skip
     assert [(t, c) for t, c, _ in live] == [(t, c) for t, c, _ in rows]
     assert max(float(np.max(np.abs(a[2] - b[2]))) for a, b in zip(live, rows, strict=True)) < 1e-9

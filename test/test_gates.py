@@ -13,7 +13,8 @@ from test_tracker import Scene
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.gates import FAR_SIGMAS, PhysicalGates
 from uav_fusion.core.estimators.offline import run_tracker
-from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+from uav_fusion.core.estimators.steps import TrackerStep
+from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site

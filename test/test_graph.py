@@ -19,6 +19,7 @@ from uav_fusion.core.scoring.evaluation import Evaluator, feed_flight, feed_step
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.graph import Graph
 from uav_fusion.ros import conversions as cv
+from uav_fusion.ros import odometry as od
 from uav_fusion.ros.qos import stream_qos
 
 
@@ -44,11 +45,11 @@ def _overrides(flight_dir: Path, out: Path, rate: float, rf_delay: float = 0.0) 
     }
 
 
-def _run_graph(ctx: Context, ov: dict[str, Any]) -> tuple[Graph, list[cv.OdomState]]:
+def _run_graph(ctx: Context, ov: dict[str, Any]) -> tuple[Graph, list[od.OdomState]]:
     graph = Graph(ctx, ov)
-    got: list[cv.OdomState] = []
+    got: list[od.OdomState] = []
     graph.evaluator.create_subscription(
-        Odometry, "fusion/odom", lambda m: got.append(cv.odometry_to_state(m)), stream_qos(5000)
+        Odometry, "fusion/odom", lambda m: got.append(od.odometry_to_state(m)), stream_qos(5000)
     )
     res = graph.run(timeout_s=120.0)
     assert res.ok, res.message
@@ -66,7 +67,7 @@ def _table_equal(live: Any, ref: Any) -> None:
             assert a.stats.max == pytest.approx(b.stats.max, abs=1e-9), a.key
 
 
-def _same_track(got: list[cv.OdomState], steps: list[Any]) -> None:
+def _same_track(got: list[od.OdomState], steps: list[Any]) -> None:
     assert [g.t for g in got] == [s.t for s in steps]
     err = np.abs(np.array([g.x for g in got]) - np.array([s.x for s in steps]))
     assert float(err.max()) < 1e-9

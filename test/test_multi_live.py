@@ -28,7 +28,8 @@ from uav_fusion.core.scoring.gospa import (
 )
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.nodes.evaluator_node import EvaluatorNode
-from uav_fusion.ros.conversions import state_to_odometry, truth_to_navsatfix
+from uav_fusion.ros.conversions import truth_to_navsatfix
+from uav_fusion.ros.odometry import state_to_odometry
 
 T0 = 1_760_000_000.0
 

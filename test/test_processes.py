@@ -26,7 +26,7 @@ from test_graph_flight import write_flight
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile, run_flight
 from uav_fusion.core.site import load_site
-from uav_fusion.ros import conversions as cv
+from uav_fusion.ros import odometry as od
 from uav_fusion.ros.qos import stream_qos
 
 pytestmark = pytest.mark.processes
@@ -123,7 +123,7 @@ def test_separate_processes_equal_the_offline_run(ctx: Context, tmp_path: Path) 
     finally:
         codes = procs.stop()
         node.destroy_node()
-    got = [cv.odometry_to_state(m) for m in odom]
+    got = [od.odometry_to_state(m) for m in odom]
     assert [g.t for g in got] == [s.t for s in offline]
     err = np.abs(np.array([g.x for g in got]) - np.array([s.x for s in offline]))
     assert float(err.max()) < 1e-9

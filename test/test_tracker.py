@@ -20,7 +20,8 @@ from uav_fusion.core.estimators.gates import PhysicalGates
 from uav_fusion.core.estimators.objects import ObjectTable
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
-from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+from uav_fusion.core.estimators.steps import TrackerStep
+from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.site import RadarCalibration, Site, load_site

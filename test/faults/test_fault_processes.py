@@ -28,6 +28,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 
 from uav_fusion.ros import conversions as cv
+from uav_fusion.ros import odometry as od
 from uav_fusion.ros.qos import stream_qos
 
 pytestmark = pytest.mark.processes
@@ -191,7 +192,7 @@ def test_fusion_node_sigkill_and_restart_reinitialises_and_the_gap_is_reported(
         obs.destroy()
     times = [cv.time_from_stamp(o.header.stamp) for o in obs.odom]
     assert times[n1 - 1] == T0 + 9.75 and times[n1] == T0 + 20.0  # restarted at the new data
-    second = [cv.odometry_to_state(o) for o in obs.odom[n1:]]
+    second = [od.odometry_to_state(o) for o in obs.odom[n1:]]
     assert abs(second[0].x[0] - straight(T0 + 20.0)[0]) < 1e-6  # a fresh track at the report
     assert "Traceback" not in procs.log("fusion2")
     text = (rep / "report.md").read_text()

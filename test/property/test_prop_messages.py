@@ -24,6 +24,7 @@ from rclpy.context import Context
 from uav_fusion.core.estimators import FusionEstimator, load_profile
 from uav_fusion.core.records import RADAR, RF, Measurement
 from uav_fusion.core.site import load_site
+from uav_fusion.ros import odometry as od
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "faults"))  # the node harness
 SITE = load_site()
@@ -96,7 +97,7 @@ def test_truth_navsatfix_converts_or_is_dropped_by_reason(msg: object) -> None:
 @given(msg=odometries())
 def test_odometry_converts_or_is_dropped_by_reason(msg: object) -> None:
     try:
-        s = cv.odometry_to_state(msg)  # type: ignore[arg-type]
+        s = od.odometry_to_state(msg)  # type: ignore[arg-type]
     except cv.MessageError as exc:
         assert exc.reason in REASONS, exc
         return

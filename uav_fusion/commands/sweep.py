@@ -24,11 +24,10 @@ from uav_fusion.core.bench.sweep import (
     run_sweep_task,
     summary_rows,
     sweep_tasks,
-    tradeoff_rows,
     write_figure,
     write_table,
-    write_tradeoff_figure,
 )
+from uav_fusion.core.bench.tradeoff import tradeoff_rows, write_tradeoff_figure
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path

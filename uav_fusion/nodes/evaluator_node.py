@@ -84,10 +84,10 @@ from uav_fusion.ros.conversions import (
     msg_to_radar_measurement,
     msg_to_rf_measurement,
     navsatfix_to_truth,
-    odometry_to_state,
     time_from_stamp,
 )
 from uav_fusion.ros.diagnostics import evaluation_statuses, make_status, tracks_status
+from uav_fusion.ros.odometry import odometry_to_state
 from uav_fusion.ros.params import Param, declare_all, not_empty
 from uav_fusion.ros.qos import stream_qos
 

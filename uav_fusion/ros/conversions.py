@@ -25,7 +25,8 @@ Representations (see ``docs/graph.md`` for the whole table):
   variances :data:`UNKNOWN_VARIANCE`), so the body frame is aligned with ENU and the twist's
   linear part is the ENU velocity x[3:6]. Pose covariance position block = P[0:3, 0:3]; twist
   covariance linear block = P[3:6, 3:6]. The position-velocity cross covariance has no place
-  in Odometry and is lost: :func:`odometry_to_state` returns it as zeros.
+  in Odometry and is lost: :func:`~uav_fusion.ros.odometry.odometry_to_state` returns it as zeros
+  (the filter state's messages: :mod:`uav_fusion.ros.odometry`).
 
 Malformed input raises :class:`MessageError` whose ``reason`` is a short counter key
 (``nan``, ``bad_covariance``, ``wrong_frame``, ``zero_stamp``, ``bad_stamp`` (negative
@@ -38,15 +39,12 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
-from typing import Protocol
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
-from nav_msgs.msg import Odometry, Path
+from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from sensor_msgs.msg import NavSatFix, NavSatStatus, PointCloud2, PointField
 
 from uav_fusion.core.data import clouds
@@ -95,19 +93,6 @@ __all__ = [
 ]
 
 
-class StepLike(Protocol):
-    """What :func:`step_to_odometry` needs of an estimator step."""
-
-    @property
-    def t(self) -> float: ...
-
-    @property
-    def x(self) -> FloatArray: ...
-
-    @property
-    def P(self) -> FloatArray: ...
-
-
 # --- time ---------------------------------------------------------------------------------
 
 
@@ -122,7 +107,7 @@ def time_from_stamp(stamp: Time) -> float:
     return float(stamp.sec) + float(stamp.nanosec) / _NS
 
 
-def _check_stamp(stamp: Time) -> float:
+def check_stamp(stamp: Time) -> float:
     sec, nsec = stamp.sec, stamp.nanosec
     if sec == 0 and nsec == 0:
         raise MessageError("zero_stamp", "message has no stamp (0)")
@@ -131,7 +116,7 @@ def _check_stamp(stamp: Time) -> float:
     return float(sec) + float(nsec) / _NS
 
 
-def _check_position(z: FloatArray, what: str) -> None:
+def check_position(z: FloatArray, what: str) -> None:
     if not np.all(np.isfinite(z)):
         raise MessageError("nan", f"{what} is not finite")
     if float(np.max(np.abs(z))) > MAX_ABS_ENU_M:
@@ -190,7 +175,7 @@ def _check_cov_block(c: FloatArray, what: str) -> None:
     check_cov3(a, b, d, e, f, g, h, i, j, what)
 
 
-def _pose_cov(pos: FloatArray) -> FloatArray:
+def pose_cov(pos: FloatArray) -> FloatArray:
     return np.array(pose_covariance(pos.tolist()), dtype=np.float64)
 
 
@@ -210,7 +195,7 @@ def radar_to_msg(
     Rm = np.asarray(R, dtype=float)
     if Rm.shape != (3, 3):
         raise MessageError("bad_covariance", f"radar R must be 3x3, got {Rm.shape}")
-    msg.pose.covariance = _pose_cov(Rm)
+    msg.pose.covariance = pose_cov(Rm)
     return msg
 
 
@@ -242,7 +227,7 @@ def msg_to_radar_measurement(
     position covariance that is not finite, symmetric and positive definite.
     """
     header = msg.header
-    t = _check_stamp(header.stamp)
+    t = check_stamp(header.stamp)
     if expected_frame and header.frame_id != expected_frame:
         _check_frame(header.frame_id, expected_frame)
     pose = msg.pose
@@ -333,7 +318,7 @@ def msg_to_rf_measurement(
     Raises :class:`MessageError` on a zero stamp, wrong frame or partly non-finite point.
     """
     header = msg.header
-    t = _check_stamp(header.stamp)
+    t = check_stamp(header.stamp)
     if expected_frame and header.frame_id != expected_frame:
         _check_frame(header.frame_id, expected_frame)
     pt = msg.point
@@ -405,7 +390,7 @@ def _cloud_fields(msg: PointCloud2) -> list[clouds.CloudField]:
 
 
 def _cloud_header(msg: PointCloud2, expected_frame: str | None) -> float:
-    t = _check_stamp(msg.header.stamp)
+    t = check_stamp(msg.header.stamp)
     if expected_frame and msg.header.frame_id != expected_frame:
         _check_frame(msg.header.frame_id, expected_frame)
     return t
@@ -454,7 +439,7 @@ def truth_to_navsatfix(fix: TruthFix, frame_id: str) -> NavSatFix:
 
 def navsatfix_to_truth(msg: NavSatFix, site: Site) -> TruthFix:
     """NavSatFix -> :class:`TruthFix` with ENU from ``site`` (velocity unknown: NaN)."""
-    t = _check_stamp(msg.header.stamp)
+    t = check_stamp(msg.header.stamp)
     if msg.status.status == NavSatStatus.STATUS_NO_FIX:
         raise MessageError("no_fix", "truth fix has status NO_FIX")
     lat, lon, h = float(msg.latitude), float(msg.longitude), float(msg.altitude)
@@ -479,136 +464,3 @@ def navsatfix_to_truth(msg: NavSatFix, site: Site) -> TruthFix:
         fix_type=fix_type_from_status(msg.status.status),
         num_sats=0,
     )
-
-
-# --- filter state -------------------------------------------------------------------------
-
-
-def state_to_odometry(
-    t: float, x: FloatArray, P: FloatArray, frame_id: str, child_frame_id: str
-) -> Odometry:
-    """State [E N U vE vN vU] with covariance P (6x6) as Odometry."""
-    xv = np.asarray(x, dtype=float).reshape(6)
-    Pm = np.asarray(P, dtype=float).reshape(6, 6)
-    msg = Odometry()
-    msg.header.stamp = stamp_from_time(t)
-    msg.header.frame_id = frame_id
-    msg.child_frame_id = child_frame_id
-    pos = msg.pose.pose.position
-    pos.x, pos.y, pos.z = float(xv[0]), float(xv[1]), float(xv[2])
-    msg.pose.pose.orientation.w = 1.0
-    msg.pose.covariance = _pose_cov(Pm[:3, :3])
-    lin = msg.twist.twist.linear
-    lin.x, lin.y, lin.z = float(xv[3]), float(xv[4]), float(xv[5])
-    msg.twist.covariance = _pose_cov(Pm[3:, 3:])
-    return msg
-
-
-def odometry_from_values(
-    t: float, v: Sequence[float], frame_id: str, child_frame_id: str
-) -> Odometry:
-    """Odometry from a step's packed values (x[0:6], then P's 21-entry upper triangle,
-    :attr:`uav_fusion.core.estimators.Step.values`): the message :func:`state_to_odometry`
-    builds, without building the 6x6 arrays."""
-    u = UNKNOWN_VARIANCE
-    msg = Odometry()
-    h = msg.header
-    h.stamp = stamp_from_time(t)
-    h.frame_id = frame_id
-    msg.child_frame_id = child_frame_id
-    pose = msg.pose
-    pos = pose.pose.position
-    pos.x, pos.y, pos.z = v[0], v[1], v[2]
-    pose.pose.orientation.w = 1.0
-    # upper-triangle indices (offset 6): P00 0, P01 1, P02 2, P11 6, P12 7, P22 11
-    p00, p01, p02, p11, p12, p22 = v[6], v[7], v[8], v[12], v[13], v[17]
-    pose.covariance = np.array((
-        p00, p01, p02, 0.0, 0.0, 0.0, p01, p11, p12, 0.0, 0.0, 0.0,
-        p02, p12, p22, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0,
-        0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u,
-    ))
-    twist = msg.twist
-    lin = twist.twist.linear
-    lin.x, lin.y, lin.z = v[3], v[4], v[5]
-    # P33 15, P34 16, P35 17, P44 18, P45 19, P55 20
-    q00, q01, q02, q11, q12, q22 = v[21], v[22], v[23], v[24], v[25], v[26]
-    twist.covariance = np.array((
-        q00, q01, q02, 0.0, 0.0, 0.0, q01, q11, q12, 0.0, 0.0, 0.0,
-        q02, q12, q22, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0,
-        0.0, 0.0, 0.0, 0.0, u, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, u,
-    ))
-    return msg
-
-
-def navsatfix_from_enu(
-    t: float, lat: float, lon: float, h: float, v: Sequence[float], frame_id: str
-) -> NavSatFix:
-    """A fused position as NavSatFix: latitude/longitude (deg), altitude HAE (m), position
-    covariance = P's position block (ENU, NavSatFix's convention; type KNOWN), status FIX,
-    no GNSS service (it is not a satellite fix). ``v`` as in :func:`odometry_from_values`."""
-    msg = NavSatFix()
-    msg.header.stamp = stamp_from_time(t)
-    msg.header.frame_id = frame_id
-    msg.status.status = int(NavSatStatus.STATUS_FIX)
-    msg.status.service = 0
-    msg.latitude, msg.longitude, msg.altitude = lat, lon, h
-    p00, p01, p02, p11, p12, p22 = v[6], v[7], v[8], v[12], v[13], v[17]
-    msg.position_covariance = np.array((p00, p01, p02, p01, p11, p12, p02, p12, p22))
-    msg.position_covariance_type = int(NavSatFix.COVARIANCE_TYPE_KNOWN)
-    return msg
-
-
-def path_from_points(
-    points: Iterable[tuple[float, float, float, float]], frame_id: str
-) -> Path:
-    """nav_msgs/Path of (t, east, north, up) points in ``frame_id`` (orientation identity);
-    the path's stamp is the last point's."""
-    msg = Path()
-    msg.header.frame_id = frame_id
-    poses = []
-    for t, e, n, u in points:
-        ps = PoseStamped()
-        ps.header.stamp = stamp_from_time(t)
-        ps.header.frame_id = frame_id
-        pos = ps.pose.position
-        pos.x, pos.y, pos.z = e, n, u
-        ps.pose.orientation.w = 1.0
-        poses.append(ps)
-    msg.poses = poses
-    if poses:
-        msg.header.stamp = poses[-1].header.stamp
-    return msg
-
-
-def step_to_odometry(step: StepLike, frame_id: str, child_frame_id: str) -> Odometry:
-    """An estimator step (``t``, ``x``, ``P``) as Odometry."""
-    return state_to_odometry(step.t, step.x, step.P, frame_id, child_frame_id)
-
-
-@dataclass(frozen=True)
-class OdomState:
-    """A state read back from Odometry; ``P``'s position-velocity cross blocks are zero."""
-
-    t: float
-    x: FloatArray
-    P: FloatArray
-    frame_id: str
-    child_frame_id: str
-
-
-def odometry_to_state(msg: Odometry) -> OdomState:
-    """Odometry -> state (inverse of :func:`state_to_odometry` up to the lost cross terms).
-
-    Raises :class:`MessageError` on a zero or impossible stamp, a non-finite state or a
-    position beyond :data:`MAX_ABS_ENU_M`.
-    """
-    t = _check_stamp(msg.header.stamp)
-    p, v = msg.pose.pose.position, msg.twist.twist.linear
-    x = np.array([p.x, p.y, p.z, v.x, v.y, v.z], dtype=float)
-    if not np.all(np.isfinite(x)):
-        raise MessageError("nan", "odometry state is not finite")
-    _check_position(x[:3], "odometry position")
-    P = np.zeros((6, 6))
-    P[:3, :3] = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)[:3, :3]
-    P[3:, 3:] = np.asarray(msg.twist.covariance, dtype=float).reshape(6, 6)[:3, :3]
-    return OdomState(t, x, P, msg.header.frame_id, msg.child_frame_id)

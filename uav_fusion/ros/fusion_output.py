@@ -48,6 +48,7 @@ from uav_fusion.core.live.pipeline import Pipeline
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.site import Site
 from uav_fusion.ros import conversions as cv
+from uav_fusion.ros import odometry as od
 from uav_fusion.ros.diagnostics import make_status
 from uav_fusion.ros.fusion_input import FusionInput
 from uav_fusion.ros.qos import DIAGNOSTICS_QOS
@@ -172,7 +173,7 @@ class FusionOutput:
             self.smoothed_published += 1
             if self.pub_smoothed.get_subscription_count():
                 self.pub_smoothed.publish(
-                    cv.state_to_odometry(t, x, P, self.frame, self.child_frame)
+                    od.state_to_odometry(t, x, P, self.frame, self.child_frame)
                 )
 
     def _step(self, step: Step) -> None:
@@ -210,7 +211,7 @@ class FusionOutput:
         side = self.pub_updated if updated else self.pub_coasted
         odom = self.pub_odom if not self.fixed_rate else None
         if side.get_subscription_count() or (odom and odom.get_subscription_count()):
-            msg = cv.odometry_from_values(step.t, v, self.frame, self.child_frame)
+            msg = od.odometry_from_values(step.t, v, self.frame, self.child_frame)
             side.publish(msg)
             if odom is not None:
                 odom.publish(msg)
@@ -234,7 +235,7 @@ class FusionOutput:
         self.grid_published += 1
         if self.pub_odom.get_subscription_count():
             self.pub_odom.publish(
-                cv.state_to_odometry(gs.t, gs.x, gs.P, self.frame, self.child_frame)
+                od.state_to_odometry(gs.t, gs.x, gs.P, self.frame, self.child_frame)
             )
         if self.pub_fix.get_subscription_count():
             v = (*gs.x.tolist(), *(gs.P[i, j] for i, j in _UPPER))
@@ -256,19 +257,19 @@ class FusionOutput:
         if self.pub_tracks.get_subscription_count():
             for o in ep.tracks:
                 self.pub_tracks.publish(
-                    cv.state_to_odometry(ep.t, o.x, o.P, self.frame, f"track_{o.track_id}")
+                    od.state_to_odometry(ep.t, o.x, o.P, self.frame, f"track_{o.track_id}")
                 )
 
     def _fix(self, t: float, v: Sequence[float]) -> NavSatFix:
         """The fused position as NavSatFix (WGS84, HAE; covariance = P's position block in
         ENU, which is NavSatFix's convention)."""
         lat, lon, h = self.site.to_geodetic(v[0], v[1], v[2])
-        return cv.navsatfix_from_enu(t, float(lat), float(lon), float(h), v, self.child_frame)
+        return od.navsatfix_from_enu(t, float(lat), float(lon), float(h), v, self.child_frame)
 
     # --- views ----------------------------------------------------------------------------
     def path_message(self) -> NavPath:
         """fusion/path: the latest ``path_max_poses`` fused positions."""
-        return cv.path_from_points(self._path, self.frame)
+        return od.path_from_points(self._path, self.frame)
 
     def markers_message(self) -> MarkerArray:
         """fusion/markers: every layer of :mod:`uav_fusion.ros.visualization`."""

@@ -79,8 +79,7 @@ from uav_fusion.core.bench.multi import (
 )
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators.offline import run_flight
-from uav_fusion.core.estimators.steps import UPDATED
-from uav_fusion.core.estimators.tracker import TrackerStep
+from uav_fusion.core.estimators.steps import UPDATED, TrackerStep
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RADAR
 from uav_fusion.core.scoring.fixed_rate import (

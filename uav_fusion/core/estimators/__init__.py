@@ -35,8 +35,8 @@ from uav_fusion.core.estimators.selection import (
     frames_input,
     largest_track_id,
 )
-from uav_fusion.core.estimators.steps import STATUSES, Step
-from uav_fusion.core.estimators.tracker import Tracker, TrackerStep, TrackEstimate
+from uav_fusion.core.estimators.steps import STATUSES, Step, TrackerStep
+from uav_fusion.core.estimators.tracker import Tracker, TrackEstimate
 from uav_fusion.core.profiles.model import Profile, load_profile, profile_from_dict
 
 __all__ = [

@@ -41,7 +41,8 @@ from uav_fusion.core.estimators.steps import DISCARDED
 from uav_fusion.core.records import RADAR, RadarTrack
 
 if TYPE_CHECKING:
-    from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+    from uav_fusion.core.estimators.steps import TrackerStep
+    from uav_fusion.core.estimators.tracker import Tracker
 
 # a candidate report of a frame: (index in the frame, report, its object, the object's score,
 # z, R, NIS against the track, inside the gate)

@@ -39,9 +39,14 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+import numpy.typing as npt
+
 from uav_fusion.core.estimators.kalman import UPPER_INDEX, MotionFilter, PackedR
 from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.profiles.settings import ScoreConfig
+
+FloatArray = npt.NDArray[np.float64]
 
 #: A fix moving the track further than this many of its own sigmas needs a second fix.
 FAR_SIGMAS = 3.0
@@ -171,3 +176,14 @@ def rf_move(f: MotionFilter, z: Sequence[float], r: PackedR) -> float:
     ye, yn = z[0] - x[0], z[1] - x[1]
     ve, vn = (d * ye - b * yn) / det, (a * yn - b * ye) / det
     return math.hypot(pe * ve + pen * vn, pen * ve + pn * vn)
+
+
+def horizontal_nis(x: FloatArray, p: FloatArray, z: Sequence[float], r: PackedR) -> float:
+    """The NIS of a 2D fix ``z`` (R ``r``, packed) against the state ``x`` with covariance
+    ``p`` (full arrays)."""
+    ye, yn = z[0] - x[0], z[1] - x[1]
+    a, b, d = p[0, 0] + r[0], p[0, 1] + r[1], p[1, 1] + r[2]
+    det = a * d - b * b
+    if not det > 0.0:
+        return math.inf
+    return float((d * ye * ye - 2.0 * b * ye * yn + a * yn * yn) / det)

@@ -16,8 +16,8 @@ from uav_fusion.core.estimators.base import drive, make_estimator
 from uav_fusion.core.estimators.paper import FusionEstimator
 from uav_fusion.core.estimators.selection import StreamInfo, StreamItem, input_info
 from uav_fusion.core.estimators.smoothing import Filtered, fixed_lag
-from uav_fusion.core.estimators.steps import Step
-from uav_fusion.core.estimators.tracker import Tracker, TrackerStep
+from uav_fusion.core.estimators.steps import Step, TrackerStep
+from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import Site

@@ -152,3 +152,42 @@ class Step:
             f"reason={self.reason!r}, nis={nis}, dim={self.dim}, track_id={self.track_id}, "
             f"seq={self.seq}, x={np.array2string(self.x, precision=2)})"
         )
+
+
+class TrackerStep(Step):
+    """A :class:`Step` with the measurement, its object's UAV score, the robust weight, the
+    IMM mode probabilities and the track segment (a new one starts at every track start)."""
+
+    __slots__ = ("mode_probs", "q_eff", "score", "segment", "weight", "z")
+
+    def __init__(
+        self, t: float, source: str, status: str, reason: str | None, nis: float | None,
+        state: bytes, dim: int, track_id: int | None, seq: int, z: tuple[float, ...],
+        score: float | None, weight: float | None, mode_probs: tuple[float, ...], segment: int,
+        q_eff: tuple[float, float, float],
+    ) -> None:  # fmt: skip
+        self.t = t
+        self.source = source
+        self.status = status
+        self.reason = reason
+        self.nis = nis
+        self._state = state
+        self._x = None
+        self._P = None
+        self.dim = dim
+        self.track_id = track_id
+        self.seq = seq
+        self.z = z
+        self.score = score
+        self.weight = weight
+        self.mode_probs = mode_probs
+        self.segment = segment
+        self.q_eff = q_eff
+
+    def with_state(self, state: bytes) -> TrackerStep:
+        """A copy with another packed state (x then the upper triangle of P)."""
+        return TrackerStep(
+            self.t, self.source, self.status, self.reason, self.nis, state, self.dim,
+            self.track_id, self.seq, self.z, self.score, self.weight, self.mode_probs,
+            self.segment, self.q_eff,
+        )  # fmt: skip

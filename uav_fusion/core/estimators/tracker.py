@@ -44,7 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimators.follow import RadarFollower
-from uav_fusion.core.estimators.gates import PhysicalGates, rf_move
+from uav_fusion.core.estimators.gates import PhysicalGates, horizontal_nis, rf_move
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
 from uav_fusion.core.estimators.kalman import (
     UPPER_INDEX,
@@ -72,6 +72,7 @@ from uav_fusion.core.estimators.steps import (
     TENTATIVE,
     UPDATED,
     Step,
+    TrackerStep,
 )
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RadarTrack, RfAttempt
@@ -83,45 +84,6 @@ _pack = struct.Struct("27d").pack
 _NAN_STATE = _pack(*(math.nan,) * 27)
 # a filter's (x, P) lists with their packed bytes, mode probabilities and effective q
 _Packed = tuple[object, object, bytes, tuple[float, ...], tuple[float, float, float]]
-
-
-class TrackerStep(Step):
-    """A :class:`Step` with the measurement, its object's UAV score, the robust weight, the
-    IMM mode probabilities and the track segment (a new one starts at every track start)."""
-
-    __slots__ = ("mode_probs", "q_eff", "score", "segment", "weight", "z")
-
-    def __init__(
-        self, t: float, source: str, status: str, reason: str | None, nis: float | None,
-        state: bytes, dim: int, track_id: int | None, seq: int, z: tuple[float, ...],
-        score: float | None, weight: float | None, mode_probs: tuple[float, ...], segment: int,
-        q_eff: tuple[float, float, float],
-    ) -> None:  # fmt: skip
-        self.t = t
-        self.source = source
-        self.status = status
-        self.reason = reason
-        self.nis = nis
-        self._state = state
-        self._x = None
-        self._P = None
-        self.dim = dim
-        self.track_id = track_id
-        self.seq = seq
-        self.z = z
-        self.score = score
-        self.weight = weight
-        self.mode_probs = mode_probs
-        self.segment = segment
-        self.q_eff = q_eff
-
-    def with_state(self, state: bytes) -> TrackerStep:
-        """A copy with another packed state (x then the upper triangle of P)."""
-        return TrackerStep(
-            self.t, self.source, self.status, self.reason, self.nis, state, self.dim,
-            self.track_id, self.seq, self.z, self.score, self.weight, self.mode_probs,
-            self.segment, self.q_eff,
-        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -546,14 +508,9 @@ class Tracker:
 
     def _coarse_check(self, t: float, z: tuple[float, ...], r: PackedR, var: float) -> None:
         """A fix too coarse to update the track still says whether the track is near the
-        emitter: it joins the run of agreeing fixes outside the gate (gates.py), and may end
-        the track (it does not start one)."""
+        emitter: it joins the run of agreeing fixes outside the gate (gates.py)."""
         x, p = self.predict_to(t)
-        ye, yn = z[0] - x[0], z[1] - x[1]
-        a, b, d = p[0, 0] + r[0], p[0, 1] + r[1], p[1, 1] + r[2]
-        det = a * d - b * b
-        nis = (d * ye * ye - 2.0 * b * ye * yn + a * yn * yn) / det if det > 0 else math.inf
-        if nis <= self._g2:
+        if horizontal_nis(x, p, z, r) <= self._g2:
             self.gates.rf_inside()
         elif self.gates.rf_outside(t, z[0], z[1], var, max(2, self.profile.confirm_m)):
             self._drop("rf_disagrees")
