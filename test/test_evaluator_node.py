@@ -26,12 +26,8 @@ from uav_fusion.core.records import TruthFix
 from uav_fusion.core.scoring.evaluation import Evaluator
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.nodes.evaluator_node import EvaluatorNode
-from uav_fusion.ros.conversions import (
-    radar_to_msg,
-    rf_to_msg,
-    state_to_odometry,
-    truth_to_navsatfix,
-)
+from uav_fusion.ros.conversions import radar_to_msg, rf_to_msg, truth_to_navsatfix
+from uav_fusion.ros.odometry import state_to_odometry
 
 T0 = 1_760_000_000.0
 R3 = np.diag([25.0, 25.0, 100.0])
