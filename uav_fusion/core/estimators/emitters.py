@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from uav_fusion.core.estimators.adaptive import HELD_S
 from uav_fusion.core.estimators.kalman import PackedR
 from uav_fusion.core.estimators.parts import MofN, rf_start, scale_packed
 from uav_fusion.core.records import RfAttempt
@@ -69,7 +70,7 @@ class Emitters:
         )
         if own and not tentative_only:
             tr = min(own, key=lambda x: (not x.confirmed, x.id))
-            self.update(tr, t, z, r)
+            self.update(tr, t, z, r, att.cep)
             return
         free = [
             (tr.filter.nis(z, r), tr.id, tr)
@@ -84,10 +85,10 @@ class Emitters:
             mt._count("emitter_linked")
             for o in own:  # the emitter's tentative track: the confirmed track took over
                 mt._drop(o, "emitter_linked")
-            self.update(tr, t, z, r)
+            self.update(tr, t, z, r, att.cep)
             return
         if own:
-            self.update(min(own, key=lambda x: x.id), t, z, r)
+            self.update(min(own, key=lambda x: x.id), t, z, r, att.cep)
             return
         tr = self.start(t, z, r)
         tr.emitter = em
@@ -104,7 +105,9 @@ class Emitters:
             tr.mofn = MofN(p.confirm_m, p.confirm_n)
         return tr
 
-    def update(self, tr: UavTrack, t: float, z: tuple[float, float], r: PackedR) -> None:
+    def update(
+        self, tr: UavTrack, t: float, z: tuple[float, float], r: PackedR, cep: float | None = None
+    ) -> None:
         """The fix updates (or is a rejection of) ``tr``; M of N for a tentative track, and
         after ``emitter_misses`` misses in a row the track loses its emitter."""
         mt = self.mt
@@ -119,6 +122,12 @@ class Emitters:
         hit = n <= mt._g2
         if hit:
             w = mt.robust.weight(n, 2)
+            if tr.confirmed:  # measurement.adaptive, before the update (see the tracker's)
+                held = tr.last_radar_t is not None and t - tr.last_radar_t <= HELD_S
+                if held and mt.front.adaptive is not None:
+                    mt.front.adaptive.check(n, 2)
+                elif not held and mt.rf_adaptive is not None:
+                    mt.rf_adaptive.observe(z, *f.mean(), cep)
             f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             mt._accept(tr, t)
         if tr.mofn is not None:

@@ -202,6 +202,8 @@ class RadarFollower:
         if len(z) == 2:
             tr._hold_vz(t, f)
             tr._count("updated_radar_horizontal")
+        elif tr.confirmed:  # measurement.adaptive: the innovation, before the update
+            tr.front.innovation(z, f)
         f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
         step = tr._used(t, RADAR, nis, z, trk.track_id, s, w)
         tr.followed = trk.track_id

@@ -58,6 +58,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
+from uav_fusion.core.estimators.adaptive import rf_status
 from uav_fusion.core.estimators.base import drive
 from uav_fusion.core.estimators.emitters import Emitters
 from uav_fusion.core.estimators.grid import GridEpoch, GridState, MultiGrid, Outputs, TrackOutput
@@ -164,7 +165,7 @@ class MultiTracker:
         self.objects = self.front.objects
         self.radar_r = self.front.radar_r
         parts = TrackParts(profile)
-        self.rf_r = parts.rf_r
+        self.rf_r, self.rf_adaptive = parts.rf_r, parts.rf_adaptive
         self.robust = parts.robust
         self.deleter = parts.deleter
         self._g2 = parts.g2
@@ -210,7 +211,7 @@ class MultiTracker:
         return {
             "multi_tracks_confirmed": len(confirmed),
             "multi_track_ids": " ".join(str(t.id) for t in confirmed) or "-",
-            **self.front.status(),
+            **self.front.status(), **rf_status(self.rf_adaptive),
         }
 
     def _outputs(self, epochs: list[GridEpoch]) -> Outputs:
@@ -444,6 +445,8 @@ class MultiTracker:
             w = self.robust.weight(n, dof)
             if dof == 2:
                 self._hold_height(tr)
+            elif tr.confirmed:  # measurement.adaptive: the innovation, before the update
+                self.front.innovation(z, tr.filter)
             tr.filter.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             self._accept(tr, t)
             if not tr.confirmed:

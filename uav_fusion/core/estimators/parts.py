@@ -35,6 +35,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from uav_fusion.core.estimators.adaptive import CEP_PER_SIGMA, AdaptiveRadarR, AdaptiveRfR
 from uav_fusion.core.estimators.imm import ImmFilter
 from uav_fusion.core.estimators.kalman import CvFilter, MotionFilter, PackedR, expand_upper, pack_r
 from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
@@ -47,8 +48,6 @@ from uav_fusion.core.site import Site
 
 FloatArray = npt.NDArray[np.float64]
 
-# the CEP of a circular Gaussian is 1.1774 sigma (sqrt(2 ln 2))
-CEP_PER_SIGMA = math.sqrt(2.0 * math.log(2.0))
 
 
 # --- measurement models -------------------------------------------------------------------
@@ -463,14 +462,23 @@ class RadarFront:
 
     def __init__(self, profile: Profile, site: Site, cfg: ScoreConfig) -> None:
         self.site = site
-        self.radar_r = radar_model_from_profile(profile, site)
+        self.radar_r: RadarRModel | AdaptiveRadarR = radar_model_from_profile(profile, site)
         self.align = alignment_from_site(site)
         self.registration = Registration(site.radar.enu, site.radar.calibration)
         r_obj = self.radar_r
         self.extra_var = 0.0
+        # with measurement.adaptive: the UAV track's R is estimated online (adaptive.py)
+        self.adaptive: AdaptiveRadarR | None = None
         if isinstance(r_obj, PolarRadarR):
-            f_obj = min(r_obj.floor_m, cfg.object_floor_m)
-            self.extra_var = r_obj.floor_m**2 - f_obj**2
+            if profile.adaptive_window is not None:
+                window, bound = profile.adaptive_window, profile.adaptive_bound
+                gate_m = math.sqrt(radar_gates2(profile, site)[0])
+                self.adaptive = AdaptiveRadarR(r_obj, window, bound, gate_m)
+                self.radar_r = self.adaptive
+                f_obj = cfg.object_floor_m
+            else:
+                f_obj = min(r_obj.floor_m, cfg.object_floor_m)
+                self.extra_var = r_obj.floor_m**2 - f_obj**2
             r_obj = replace(r_obj, floor_m=f_obj)
         self.r_obj = r_obj
         self.objects = ObjectTable(cfg, r_obj)
@@ -502,9 +510,19 @@ class RadarFront:
         if reg.pair((oe, on), (e, n), var_m2, float(max(across, 0.0))):
             self.align = alignment_from_site(self.site, reg.az_deg)
 
+    def innovation(self, z: tuple[float, ...], f: MotionFilter) -> None:
+        """A confirmed UAV track's 3D update with report ``z``, before the update: a sample
+        of the radar's noise (``measurement.adaptive``)."""
+        if self.adaptive is not None:
+            x, p = f.mean()
+            self.adaptive.observe(z, x, p)
+
     def status(self) -> dict[str, object]:
-        """The radar's registration, for /diagnostics."""
-        return self.registration.status()
+        """The radar's registration (and its online noise), for /diagnostics."""
+        out = self.registration.status()
+        if self.adaptive is not None:
+            out.update(self.adaptive.status())
+        return out
 
     def reports(self, frame: RadarFrame) -> tuple[list[int], list[Report]]:
         """The indices of the frame's non-finite reports, and every finite report (aligned,
@@ -514,6 +532,7 @@ class RadarFront:
         r_at = self.r_obj.r_at
         update = self.objects.update
         dv = self.extra_var
+        adaptive = self.adaptive
         rx, ry, rz = self.radar_pos
         align = self.align.point if self.align is not None else None
         isfinite = math.isfinite
@@ -527,7 +546,10 @@ class RadarFront:
             p3 = (e, n, u)
             ro = r_at(e, n, u)
             obj = update(trk, ro, p3)
-            r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
+            if adaptive is not None:
+                r = adaptive.r_at(e, n, u)
+            else:
+                r = (ro[0] + dv, ro[1], ro[2], ro[3] + dv, ro[4], ro[5] + dv) if dv else ro
             out.append((i, trk, obj, p3, r, (e - rx) ** 2 + (n - ry) ** 2 + (u - rz) ** 2))
         return bad, out
 
@@ -537,7 +559,12 @@ class TrackParts:
     the deleter (see the module text)."""
 
     def __init__(self, profile: Profile) -> None:
-        self.rf_r = rf_model_from_profile(profile)
+        rf_r = rf_model_from_profile(profile)
+        # with measurement.adaptive: the CEP's scale is estimated online (adaptive.py)
+        self.rf_adaptive: AdaptiveRfR | None = None
+        if isinstance(rf_r, CepRfR) and profile.adaptive_window is not None:
+            self.rf_adaptive = AdaptiveRfR(rf_r, profile.adaptive_window, profile.adaptive_bound)
+        self.rf_r: RfRModel | AdaptiveRfR = self.rf_adaptive or rf_r
         self.robust = robust_from_profile(profile)
         self.deleter = Deleter(profile.max_coast_s, profile.max_consecutive_rejections)
         self.g2 = nis_gate(profile.nis_probability, 2)

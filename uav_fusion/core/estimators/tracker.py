@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from uav_fusion.core.estimators.adaptive import HELD_S, rf_status
 from uav_fusion.core.estimators.follow import RadarFollower
 from uav_fusion.core.estimators.gates import PhysicalGates, horizontal_nis, rf_move
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
@@ -123,6 +124,7 @@ class Tracker:
         self.radar_r = self.front.radar_r
         parts = TrackParts(profile)
         self.rf_r = parts.rf_r
+        self.rf_adaptive = parts.rf_adaptive
         self.robust = parts.robust
         self.deleter = parts.deleter
         self._g2 = parts.g2
@@ -190,9 +192,10 @@ class Tracker:
         """The followed radar object, its UAV score and probability, the time since the
         last accepted measurement and the last 3D radar update, and the radar's registration."""
         best = self.best_track()
+        sensors = {**self.front.status(), **rf_status(self.rf_adaptive)}
         if best is None:
-            return {"track": "tentative" if self.active else "none", **self.front.status()}
-        out: dict[str, object] = {"track": "confirmed", **self.front.status()}
+            return {"track": "tentative" if self.active else "none", **sensors}
+        out: dict[str, object] = {"track": "confirmed", **sensors}
         ref = self.t
         if best.last_update_t is not None and ref is not None:
             out["since_last_accepted_s"] = f"{ref - best.last_update_t:.3f}"
@@ -496,6 +499,7 @@ class Tracker:
                 self._count("rf_held")
                 return [self._step(t, RF, DISCARDED, "held", nis, z, None)]
             w = self.robust.weight(nis, 2)
+            self._adapt_rf(t, f, z, nis, a.cep)
             f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             return [self._used(t, RF, nis, z, None, None, w)]
         if gates.rf_outside(t, a.e, a.n, var, max(2, self.profile.confirm_m)):
@@ -505,6 +509,19 @@ class Tracker:
                 return [self._start_rf(t, z, r)]
             return [self._step(t, RF, DISCARDED, "no_track", None, z, None)]
         return [self._rejected(t, RF, nis, z, None, None)]
+
+    def _adapt_rf(
+        self, t: float, f: MotionFilter, z: tuple[float, ...], nis: float, cep: float | None
+    ) -> None:
+        """measurement.adaptive (adaptive.py), before the fix's update: while the radar
+        holds the track the fix checks the radar's allowance for correlated errors;
+        otherwise its innovation is a sample of the RF noise."""
+        ad = self.front.adaptive
+        held = self.last_3d_t is not None and t - self.last_3d_t <= HELD_S
+        if held and ad is not None:
+            ad.check(nis, 2)
+        elif not held and self.rf_adaptive is not None:
+            self.rf_adaptive.observe(z, *f.mean(), cep)
 
     def _coarse_check(self, t: float, z: tuple[float, ...], r: PackedR, var: float) -> None:
         """A fix too coarse to update the track still says whether the track is near the

@@ -87,6 +87,8 @@ class Profile:
     radar_floor_m: float = 0.0
     radar_low_el_gain: float = 0.0
     radar_low_el_deg: float = 4.0
+    adaptive_window: int | None = None  # online R from the innovations over this many
+    adaptive_bound: float = 2.0  # ... within [spec / bound, spec * bound]
     rf_model: str = "fixed"  # fixed (r_rf) | cep
     rf_cep_scale: float = 1.0
     rf_floor_m: float = 5.0
@@ -321,6 +323,20 @@ def _validate(p: Profile, where: str, origin: Mapping[str, str] | None = None) -
         raise ConfigError(
             f"{where}: track.confirm_m and confirm_n need 1 <= confirm_m <= confirm_n, "
             f"got {p.confirm_m} and {p.confirm_n}"
+        )
+    if p.adaptive_window is not None and p.radar_model == "polar" and p.radar_floor_m:
+        raise ConfigError(
+            f"{origin.get('measurement.radar.floor_m', where)}: measurement.radar.floor_m "
+            f"({p.radar_floor_m:g}) must be 0 with measurement.adaptive (the online R "
+            "replaces the floor)"
+        )
+    if p.adaptive_window is not None and p.radar_model == "polar" and min(
+        p.radar_sigma_range_m, p.radar_sigma_az_deg, p.radar_sigma_el_deg
+    ) <= 0:
+        raise ConfigError(
+            f"{origin.get('measurement.radar.sigma_az_deg', where)}: measurement.radar: "
+            "with measurement.adaptive, sigma_range_m, sigma_az_deg and sigma_el_deg are the "
+            "specification the online sigmas are bounded around, so each must be > 0"
         )
     if p.radar_model == "polar" and p.radar_sigma_range_m + p.radar_floor_m <= 0:
         raise ConfigError(

@@ -81,6 +81,7 @@ SECTIONS: dict[str, str] = {
     "measurement": "the sensors' measurement models",
     "measurement.radar": "the radar's measurement model",
     "measurement.rf": "the RF fixes' measurement model",
+    "measurement.adaptive": "online R from the UAV track's innovations (covariance matching)",
     "gating": "which radar reports may update the track",
     "sources": "which sensors are used at all",
     "track": "track start, confirmation and deletion",
@@ -173,6 +174,16 @@ _MEASUREMENT = (
            "(mostly non-line-of-sight)", unit="m", bounds="> 0", null="none discarded",
            fit=CALIBRATE),
     ),
+)
+_ADAPTIVE = _group(
+    "measurement.adaptive", TRACKER,
+    _k("window", "adaptive_window", INTEGER, DESIGN, "innovations each online sigma averages "
+       "(radar range, azimuth, elevation; the RF CEP's scale); the radar's allowance for "
+       "correlated errors follows the RF fixes instead of measurement.radar.floor_m, which "
+       "must be 0", bounds=">= 2", null="off: R from the fixed sigmas and floor"),
+    _k("bound", "adaptive_bound", NUMBER, SPEC, "each online sigma stays within [spec, spec x "
+       "bound] (spec: the profile's sigma or cep_scale); the allowance within [f0 / bound, "
+       "f0 x bound], f0 = sigma_az x the 3D range gate", bounds=">= 1"),
 )
 _GATING = _group(
     "gating", ALL,
@@ -408,8 +419,8 @@ _EVALUATION = (
 
 #: Every profile key, in the order of the README.
 KEYS: tuple[Key, ...] = (
-    *_TOP, *_MOTION, *_MEASUREMENT, *_GATING, *_SOURCES, *_TRACK, *_UPDATE, *_ASSOCIATION,
-    *_SMOOTHER, *_MULTI, *_EVALUATION,
+    *_TOP, *_MOTION, *_MEASUREMENT, *_ADAPTIVE, *_GATING, *_SOURCES, *_TRACK, *_UPDATE,
+    *_ASSOCIATION, *_SMOOTHER, *_MULTI, *_EVALUATION,
 )
 BY_PATH: dict[str, Key] = {k.path: k for k in KEYS}
 
