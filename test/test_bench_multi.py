@@ -219,11 +219,17 @@ def test_the_bench_command_runs_the_multi_part(small: tuple[Path, Path], tmp_pat
     doc = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     sc = doc["profiles"]["tracker"]
     assert sc["flights"] == 1 and 0.0 < sc["coverage_pct"] <= 100.0
+    # the radar's own tracks, passed through, are scored beside the profile
+    assert doc["profiles"]["radar"]["flights"] == 1
     with (out / "per_flight_multi.csv").open(newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
-    assert [(r["uav"], r["silent"]) for r in rows] == [("uav1", "0"), ("uav2", "1")]
+    assert [(r["profile"], r["uav"], r["silent"]) for r in rows] == [
+        ("tracker", "uav1", "0"), ("tracker", "uav2", "1"),
+        ("radar", "uav1", "0"), ("radar", "uav2", "1"),
+    ]  # fmt: skip
     assert (out / "bench_multi.png").stat().st_size > 10_000
-    assert "| tracker | 1 |" in (out / "table.md").read_text(encoding="utf-8")
+    table = (out / "table.md").read_text(encoding="utf-8")
+    assert "| tracker | 1 |" in table and "| radar | 1 |" in table
 
 
 def test_the_multi_part_needs_a_tracker_profile(small: tuple[Path, Path], tmp_path: Path) -> None:

@@ -297,8 +297,15 @@ def _run_multi(
         write_multi_csv,
         write_multi_figure,
     )
+    from uav_fusion.core.bench.radar_baseline import NAME as RADAR_BASELINE
+    from uav_fusion.core.bench.radar_baseline import against_radar
 
     for p in profiles:
+        if p.name == RADAR_BASELINE:
+            raise ConfigError(
+                f"{p.source}: the profile name {RADAR_BASELINE!r} is the multi-UAV benchmark's "
+                "baseline (the radar's own tracks); rename the profile"
+            )
         if not p.uses_tracker:
             raise ConfigError(
                 f"{p.source}: the multi-UAV benchmark needs a tracker profile (estimator: "
@@ -317,12 +324,13 @@ def _run_multi(
             describe=lambda t: t.flight.flight_id,
         )
         t_gen = time.perf_counter() - t0
+        # the profiles, then the radar's own tracks passed through (radar_baseline.py)
         tasks = [
             MultiScoreTask(
                 f, p, site, definition.grid_hz, settings.airborne_min_m,
-                settings.observable_window_s, definition.excuse_grounded,
+                settings.observable_window_s, definition.excuse_grounded, baseline=base,
             )
-            for p in profiles
+            for p, base in [*((p, False) for p in profiles), (profiles[0], True)]
             for f in flights
         ]  # fmt: skip
         t0 = time.perf_counter()
@@ -330,7 +338,8 @@ def _run_multi(
             multi_score_task,
             tasks,
             label="run+score",
-            describe=lambda t: f"{t.profile.name} on {t.flight.flight_id}",
+            describe=lambda t: f"{RADAR_BASELINE if t.baseline else t.profile.name} on "
+            f"{t.flight.flight_id}",
         )
         t_run = time.perf_counter() - t0
     scores = pool_multi(results)
@@ -352,6 +361,9 @@ def _run_multi(
         )
     )
     print(text_multi(scores))
+    print()
+    print("against the radar's own tracks (class >= 0.5, passed through):")
+    print(against_radar(results))
     print()
     for line in provenance_lines(prov):
         print(f"  {line}")

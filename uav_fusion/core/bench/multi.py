@@ -45,6 +45,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from uav_fusion.core.bench.cache import CachedFlight, read_vehicle_labels
+from uav_fusion.core.bench.radar_baseline import NAME as RADAR_BASELINE
+from uav_fusion.core.bench.radar_baseline import radar_epochs
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
@@ -52,6 +54,7 @@ from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import Flight
 from uav_fusion.core.scoring.gospa import (
+    EpochLike,
     MultiScoreSettings,
     UavTruth,
     pool,
@@ -92,6 +95,7 @@ class MultiScoreTask:
     airborne_min_m: float
     observable_window_s: float
     excuse_grounded: bool = True  # see MultiScoreSettings
+    baseline: bool = False  # the radar's own tracks (radar_baseline.py) instead of the profile
 
 
 @dataclass(frozen=True)
@@ -203,10 +207,14 @@ def multi_score_task(
     t1 = max(float(tr.t[-1]) for tr in truths.values())
     stream = list(frames_input(flight, task.profile))
     start = time.perf_counter()
-    tracker = (
-        MultiTracker(task.profile, task.site) if make_tracker is None else make_tracker(flight)
-    )
-    epochs = run_multi(tracker, stream, task.grid_hz, t0, t1)
+    epochs: Sequence[EpochLike]
+    if task.baseline:
+        epochs = radar_epochs(flight, task.site, task.grid_hz, t0, t1)
+    else:
+        tracker = (
+            MultiTracker(task.profile, task.site) if make_tracker is None else make_tracker(flight)
+        )
+        epochs = run_multi(tracker, stream, task.grid_hz, t0, t1)
     run_s = time.perf_counter() - start
     settings = MultiScoreSettings(
         step_s=1.0 / task.grid_hz,
@@ -229,7 +237,7 @@ def multi_score_task(
         plan=cf.flight.plan.name,
         seed=cf.flight.seed,
         split=cf.flight.split,
-        profile=task.profile.name,
+        profile=RADAR_BASELINE if task.baseline else task.profile.name,
         samples=samples,
         uavs=tuple(outcomes),
         crossings=tuple(crossings(flight)),

@@ -1,0 +1,108 @@
+"""The multi-UAV benchmark's baseline, the radar's own tracks passed through
+(core/bench/radar_baseline.py), and its comparison with a profile."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from uav_fusion.core.bench.multi import MultiFlightResult
+from uav_fusion.core.bench.radar_baseline import NAME, against_radar, radar_epochs
+from uav_fusion.core.records import Flight, RadarFrame, RadarTrack
+from uav_fusion.core.scoring.outcomes import FlightSamples, UavSamples
+from uav_fusion.core.site import RadarCalibration, load_site
+
+
+def _report(t: float, tid: int, prob: float | None, e: float, vel_ned: tuple[float, float, float]
+            | None = (0.0, 4.0, -1.0)) -> RadarTrack:  # fmt: skip
+    return RadarTrack(t, tid, 0.0, 0.0, 0.0, e, 500.0, 60.0, vel_ned, prob, 500.0, -10.0)
+
+
+def _flight(frames: list[RadarFrame]) -> Flight:
+    return Flight("hand", [], frames, [])
+
+
+def test_each_epoch_passes_the_latest_frames_uav_reports_moved_to_it() -> None:
+    frames = [
+        RadarFrame(10.2, (_report(10.2, 1, 0.7, 0.0), _report(10.2, 2, 0.3, 50.0))),
+        RadarFrame(11.0, (_report(11.0, 1, 0.5, 4.0), _report(11.0, 3, None, 90.0))),
+        RadarFrame(11.9, ()),  # the radar has nothing at this frame
+        RadarFrame(14.0, (_report(14.0, 5, 0.9, 7.0, None),)),
+    ]
+    eps = radar_epochs(_flight(frames), load_site(), 2.0, 10.0, 15.3)
+    assert [e.t for e in eps] == [10.0 + 0.5 * k for k in range(11)]
+    by_t = {e.t: e.tracks for e in eps}
+    assert by_t[10.0] == ()  # no frame yet
+    (a,) = by_t[10.5]  # track 2's class 0.3 is below 0.5
+    assert a.track_id == 1
+    # moved 0.3 s with its velocity: (north 0, east 4, down -1) m/s is +e and +u
+    assert np.allclose(a.x, [1.2, 500.0, 60.0 + 0.3, 4.0, 0.0, 1.0])
+    (b,) = by_t[11.0]  # class exactly 0.5 passes; no class does not
+    assert b.track_id == 1 and b.x[0] == 4.0
+    assert by_t[12.0] == ()  # the latest frame is empty
+    assert by_t[13.0] == ()  # ... and by 13.2 s more than 1.3 s old
+    (c,) = by_t[14.0]
+    assert np.allclose(c.x[:3], [7.0, 500.0, 60.0])  # no velocity reported: held
+    (d,) = by_t[15.0]  # 1 s later: still the latest frame's
+    assert d.track_id == 5 and np.array_equal(d.x, c.x)
+    assert 15.5 not in by_t  # beyond t1
+
+
+def test_a_frame_is_passed_on_for_the_radars_longest_update_interval() -> None:
+    """1.3 s (the R20's longest track update interval) after its frame a report still counts;
+    a tenth of a second later it is gone."""
+    frames = [RadarFrame(0.7, (_report(0.7, 1, 0.9, 0.0),))]
+    eps = radar_epochs(_flight(frames), load_site(), 10.0, 0.0, 2.5)
+    by_t = {round(e.t, 1): len(e.tracks) for e in eps}
+    assert (by_t[0.6], by_t[0.7], by_t[2.0], by_t[2.1]) == (0, 1, 1, 0)
+
+
+def test_the_site_calibration_corrects_the_positions() -> None:
+    site = load_site()
+    cal = replace(site, radar=replace(site.radar, calibration=RadarCalibration(1.0, 0.0, 0.1, 0.1)))
+    frames = [RadarFrame(10.0, (_report(10.0, 1, 0.9, 300.0),))]
+    raw = radar_epochs(_flight(frames), site, 1.0, 10.0, 10.0)[0].tracks[0].x
+    turned = radar_epochs(_flight(frames), cal, 1.0, 10.0, 10.0)[0].tracks[0].x
+    r = site.radar.enu
+    d_raw = math.hypot(raw[0] - r[0], raw[1] - r[1])
+    d_turned = math.hypot(turned[0] - r[0], turned[1] - r[1])
+    assert d_turned == pytest.approx(d_raw)  # turned about the radar, not moved along
+    assert math.hypot(*(turned[:2] - raw[:2])) == pytest.approx(d_raw * math.radians(1.0), rel=1e-3)
+
+
+def _samples(errors_by_uav: dict[str, list[float | None]], gospa: float) -> FlightSamples:
+    uavs = []
+    for name, errs in errors_by_uav.items():
+        ids = tuple(None if e is None else 1 for e in errs)
+        uavs.append(UavSamples(
+            name, len(errs), sum(e is not None for e in errs),
+            np.array([e for e in errs if e is not None], dtype=float), ids, 0, 0,
+            times=np.arange(len(errs), dtype=float),
+        ))  # fmt: skip
+    k = len(next(iter(errors_by_uav.values())))
+    z = np.zeros(k)
+    return FlightSamples(1.0, np.full(k, gospa), z, z, z, 0, tuple(uavs), ())
+
+
+def _result(profile: str, flight: str, samples: FlightSamples) -> MultiFlightResult:
+    return MultiFlightResult(flight, "plan", 1, "test", profile, samples, (), (), 3.0, 0.1)
+
+
+def test_the_comparison_counts_flights_and_uavs_on_the_epochs_both_cover() -> None:
+    """uav1: ours 10 / 30 (uncovered by the radar at the second epoch) against the radar's
+    12 at the first: on the epoch both cover ours is lower. uav2: ours 20 against 20, equal
+    counts as at most. A lower GOSPA on one flight of two."""
+    ours = _result("tracker", "f1", _samples({"uav1": [10.0, 30.0], "uav2": [20.0, 20.0]}, 30.0))
+    radar = _result(NAME, "f1", _samples({"uav1": [12.0, None], "uav2": [20.0, 20.0]}, 31.0))
+    ours2 = _result("tracker", "f2", _samples({"uav1": [5.0, 5.0], "uav2": [None, None]}, 40.0))
+    radar2 = _result(NAME, "f2", _samples({"uav1": [4.0, 4.0], "uav2": [9.0, 9.0]}, 40.0))
+    text = against_radar([ours, radar, ours2, radar2])
+    assert "tracker | f1 | 30.0 (31.0) | uav1 1, 10.0 (12.0); uav2 2, 20.0 (20.0)" in text
+    assert "tracker | f2 | 40.0 (40.0) | uav1 2, 5.0 (4.0); uav2 -" in text
+    assert text.endswith(
+        "tracker: GOSPA below the radar's on 1 of 2 flights; mean error at most the radar's "
+        "on 2 of 3 UAVs (epochs both cover)"
+    )
