@@ -26,10 +26,11 @@ Each run takes ``--wall-s`` wall seconds of flight (``rate`` x that many sensor 
 the input, a pipeline that waits for the RF stream releases them only at its idle flush: an
 effect of the input ending, not of the stream). ``--variant NAME:param=value,param=value``
 runs the fusion node with those parameters (repeatable; default: ``zero-wait``,
-``reorder_window_s`` 0, every measurement fused as it arrives, and ``reorder``, the 2 s reorder
-window it replaced as the default), so the pipelines are measured side by side. The fusion
-node runs with ``stall_timeout_s`` 0 (no prediction to the wall clock: the flight's stamps are
-from 2025) unless a variant sets it.
+``reorder_window_s`` 0, every measurement fused as it arrives; ``on-clock``, the same with
+``output_delay_s`` 0, the fixed-rate epochs published as the sensor time passes them; and
+``reorder``, the 2 s reorder window zero wait replaced as the default), so the pipelines are
+measured side by side. The fusion node runs with ``stall_timeout_s`` 0 (no stall predictions
+between inputs) unless a variant sets it.
 
 Usage::
 
@@ -64,8 +65,13 @@ os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="uav_fusion_bench_l
 
 BIN = Path(sys.executable).parent
 LIMIT_S = 120.0
-#: zero wait (late data re-filtered) and the reorder window it replaced, side by side
-DEFAULT_VARIANTS = ("zero-wait:reorder_window_s=0.0", "reorder:reorder_window_s=2.0")
+#: zero wait (late data re-filtered), the same with the fixed-rate epochs published on the
+#: clock, and the reorder window zero wait replaced, side by side
+DEFAULT_VARIANTS = (
+    "zero-wait:reorder_window_s=0.0",
+    "on-clock:reorder_window_s=0.0,output_delay_s=0.0",
+    "reorder:reorder_window_s=2.0",
+)
 
 
 @dataclass

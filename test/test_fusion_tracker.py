@@ -27,6 +27,7 @@ from uav_fusion.core.estimators.offline import run_tracker, smooth_steps
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.live.rewind import simulate
+from uav_fusion.core.live.schedule import ClockTick, read_schedule
 from uav_fusion.core.records import RadarFrame, RadarTrack
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode
@@ -245,8 +246,9 @@ def test_output_is_predicted_on_when_the_inputs_stall(
     last_t = fusion.pipeline.processed_t
     tracker = fusion.estimator
     assert tracker is not None and tracker.best_track() is not None
-    # with the inputs silent the epochs beyond the last measurement are published, up to the
-    # track's maximum coast (the wall clock is far ahead of these 2025 stamps)
+    # with the inputs silent the epochs beyond the last measurement are published as the
+    # sensor time runs on (the node's clock plus the inputs' stamp lead; these stamps are from
+    # 2025), never past the track's maximum coast
     max_coast = load_profile("tracker").max_coast_s
     assert max_coast is not None
     best = tracker.best_track()
@@ -323,4 +325,52 @@ def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
     assert {m.ns for m in markers} >= {"tracks", "tracks_covariance", "tracks_label"}
     diag = h.fusion.diagnostics()
     assert int(diag["tracks_published"]) == len(rows)
+    h.destroy()
+
+
+def test_output_delay_publishes_epochs_on_the_clock_and_the_schedule_reproduces_them(
+    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]], tmp_path: Any
+) -> None:
+    """output_delay_s 0: between inputs, and after the last one, the node publishes every
+    fixed-rate epoch the sensor time has passed (its clock plus the inputs' stamp lead)
+    without waiting for the next input; the clock's moves are rows of the arrival schedule,
+    and the offline run of that schedule publishes the same epochs at the same points."""
+    frames, attempts, _ = flight_data
+    site = load_site()
+    profile = load_profile("tracker")
+    sched = tmp_path / "arrivals.csv"
+    h = Harness(ctx, idle_flush_s=0.0, stall_timeout_s=0.0, output_delay_s=0.0,
+                arrivals_file=str(sched))  # fmt: skip
+    published: list[Outputs] = []
+    publish = h.fusion.output.publish
+
+    def record(out: Outputs) -> None:
+        published.append(out)
+        publish(out)
+
+    h.fusion.output.publish = record  # type: ignore[method-assign]
+    order = _order(frames, attempts, 0.0, 0)
+    h.feed(order)
+    h.spin_until(lambda: h.got() == len(frames) + len(attempts))
+    last_t = h.fusion.pipeline.processed_t
+    # no more input: the epochs after the last stamp still come, as the node's clock runs
+    h.spin_until(
+        lambda: bool(h.odom) and cv.time_from_stamp(h.odom[-1].header.stamp) > last_t + 0.5
+    )
+    rows = sched.read_text(encoding="utf-8").splitlines()
+    clock_rows = [r for r in rows if r.startswith("clock,")]
+    assert clock_rows, "the clock's moves are in the schedule"
+    h.fusion.input.arrivals.close()  # type: ignore[union-attr]
+    est = make_estimator(profile, site, 10.0, live=True)
+    flight = load_flight(data_path(DEFAULT_FLIGHT), site)
+    items = [x for x in est.flight_input(flight) if x.t <= last_t]
+    arrivals = read_schedule(sched, items)
+    outs, _, _ = simulate(lambda: make_estimator(profile, site, 10.0, live=True), arrivals)
+    live_grid = [(g.k, repr(g.x.tolist())) for o in published for g in o.grid]
+    off_grid = [(g.k, repr(g.x.tolist())) for o in outs for g in o.grid]
+    assert live_grid == off_grid[: len(live_grid)] and len(live_grid) > 1000
+    # without the clock rows the same inputs publish fewer epochs by the last one
+    inputs_only = [a for a in arrivals if not isinstance(a[1], ClockTick)]
+    outs2, _, _ = simulate(lambda: make_estimator(profile, site, 10.0, live=True), inputs_only)
+    assert len([g for o in outs2[:-1] for g in o.grid]) < len(live_grid)
     h.destroy()

@@ -7,6 +7,7 @@ import csv
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from uav_fusion.cli import main
@@ -118,3 +119,38 @@ def test_the_nodes_arrival_log_has_one_row_per_radar_frame(items, tmp_path: Path
     assert log.rows == len(items)
     back = read_schedule(log.path, items)
     assert [id(it) for _, it in back] == [id(it) for it in items]
+
+
+def test_a_clock_row_publishes_epochs_before_a_late_input(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """An RF fix arrives 0.3 s late, after the node's clock moved the output past its stamp:
+    the epochs up to the clock's time are published from the track without the fix (what a
+    live node did), and differ from those an in-order run publishes after the fix."""
+    from uav_fusion.core.live.schedule import CLOCK, ClockTick
+
+    site = load_site(None)
+    prof = load_profile("tracker")
+
+    def make():  # type: ignore[no-untyped-def]
+        return make_estimator(prof, site, 10.0, live=True)
+
+    steps = simulate(make, [(RADAR if not hasattr(it, "ok") else RF, it) for it in items])[1].steps
+    used = [s for s in steps if s.source == RF and s.status == "updated" and s.t > items[0].t + 60]
+    fix = next(it for it in items if hasattr(it, "ok") and it.t == used[0].t)
+    k = items.index(fix)
+    tick = ClockTick(fix.t + 0.3)
+    later = [(RADAR if not hasattr(it, "ok") else RF, it) for it in items[k + 1 :]]
+    before = [(RADAR if not hasattr(it, "ok") else RF, it) for it in items[:k]]
+    late = [x for x in later if x[1].t <= tick.t]
+    rest = [x for x in later if x[1].t > tick.t]
+    live = [*before, *late, (CLOCK, tick), (RF, fix), *rest]
+    in_order = [*before, (RF, fix), *late, *rest]
+    outs, _, _ = simulate(make, live)
+    at_tick = outs[len(before) + len(late)].grid
+    assert at_tick and all(fix.t < g.t <= tick.t for g in at_tick)
+    ref = {g.k: g.x for o in simulate(make, in_order)[0] for g in o.grid}
+    assert any(not np.allclose(g.x, ref[g.k]) for g in at_tick)
+    # the schedule file carries the clock's row, and reads back in place
+    rows = [(s, x.t, n * 0.01) for n, (s, x) in enumerate(live)]
+    back = read_schedule(write_schedule(tmp_path / "a.csv", rows), items)
+    assert [type(x).__name__ for _, x in back] == [type(x).__name__ for _, x in live]
+    assert back[len(before) + len(late)] == (CLOCK, tick)

@@ -13,14 +13,19 @@ The node only wires three parts together:
 
 Timers: a 0.1 s tick follows the simulated clock, flushes the buffer after ``idle_flush_s`` of
 wall time without input, predicts the fixed-rate output up to the current time when the
-inputs stall for ``stall_timeout_s`` (simulated clock, else wall clock; at most
-``max_coast_s`` past the last processed time) and publishes the views every
-``view_period_s``; diagnostics every ``diagnostics_period_s``. The ``fusion/flush`` service
-(std_srvs/Trigger) flushes the buffer, as does shutdown.
+inputs stall for ``stall_timeout_s`` (at most ``max_coast_s`` past the last processed time)
+and publishes the views every ``view_period_s``; diagnostics every ``diagnostics_period_s``.
+With ``output_delay_s`` >= 0 a 10 ms timer publishes every fixed-rate epoch once the sensor
+time is that far past it. The sensor time, for both, is the node's clock (simulated, else
+wall) plus the largest (stamp - node clock) of the last 64 inputs fused: the sensor clock
+less the quickest input's delay, whatever the offset between the sensors' clocks and the
+host's. Each such move of the output is a ``clock`` row of the arrival schedule. The
+``fusion/flush`` service (std_srvs/Trigger) flushes the buffer, as does shutdown.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections import Counter, deque
@@ -36,6 +41,7 @@ from std_srvs.srv import Trigger
 from uav_fusion.core.estimators import ESTIMATORS, Estimator, load_profile, make_estimator
 from uav_fusion.core.estimators.grid import Outputs
 from uav_fusion.core.live.pipeline import Pipeline, PipelineConfig
+from uav_fusion.core.live.schedule import CLOCK
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.site import load_site
 from uav_fusion.ros.app import run_node
@@ -78,6 +84,14 @@ def fusion_params() -> list[Param]:
             "the trackers: wall seconds without input (and nothing buffered) after which "
             "fusion/odom is predicted up to the current time (0 = never)",
             lo=0.0, hi=3600.0, read_only=False,
+        ),
+        Param(
+            "output_delay_s", -1.0,
+            "the trackers: publish each fusion/odom epoch once the sensor time, as the node's "
+            "clock and the inputs' stamps put it now, is this many seconds past it, without "
+            "waiting for the next input (< 0 = off: an epoch is published when an input moves "
+            "time past it)",
+            lo=-1.0, hi=60.0,
         ),
         topic("odom_topic", "fusion/odom",
               "every filter step (paper) or the fixed-rate output (the trackers)"),
@@ -230,6 +244,10 @@ class FusionNode(Node):
         self._sim = bool(self.get_parameter("use_sim_time").value)
         self._idle_s = float(p["idle_flush_s"])
         self._stall_s = float(p["stall_timeout_s"])
+        # output_delay_s: stamp minus node-clock time of the recent inputs; the largest says
+        # how far the sensor time is ahead of the node's clock, less the quickest link's delay
+        self._out_delay = float(p["output_delay_s"])
+        self._ahead: deque[float] = deque(maxlen=64)
         self._view_period = float(p["view_period_s"])
         self.add_post_set_parameters_callback(self._after_params)
         self._ros_clock = self.get_clock()
@@ -242,6 +260,8 @@ class FusionNode(Node):
         self.create_service(Trigger, p["flush_service"], self._on_flush)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._tick_timer = self.create_timer(0.1, self._on_tick, clock=steady)
+        if self._out_delay >= 0.0 and estimator.fixed_rate:
+            self._clock_timer = self.create_timer(0.01, self._on_clock, clock=steady)
         self._diag_timer = self.create_timer(
             float(p["diagnostics_period_s"]), self.publish_diagnostics, clock=steady
         )
@@ -342,11 +362,21 @@ class FusionNode(Node):
     def _one(self, source: str, msg: Any) -> Outputs:
         """One message: decoded (or dropped), then through the pipeline."""
         now, clock = self._now()
+        pipe = self.pipeline
         if source == RADAR:
             frame = self.input.radar(msg, now)
-            return Outputs() if frame is None else self.pipeline.radar(frame, clock)
-        attempts = self.input.rf(msg, now)
-        return Outputs() if attempts is None else self.pipeline.rf(attempts, clock)
+            if frame is None:
+                return Outputs()
+            out, t = pipe.radar(frame, clock), frame.t
+        else:
+            attempts = self.input.rf(msg, now)
+            if attempts is None:
+                return Outputs()
+            out = pipe.rf(attempts, clock)
+            t = max((a.t for a in attempts), default=math.inf)
+        if t <= pipe.processed_t:  # fused (not held, not dropped as ahead of time)
+            self._ahead.append(t - now)
+        return out
 
     # --- time passing ---------------------------------------------------------------------
     def flush(self) -> int:
@@ -375,9 +405,31 @@ class FusionNode(Node):
             n = self.flush()
             self.get_logger().info(f"no input for {self._idle_s:g} s: flushed {n} measurement(s)")
         if self._stall_s > 0 and quiet_s >= self._stall_s:
-            self.output.publish(pipe.stall(now))
+            self._move_output(self._sensor_now(now))
         if time.monotonic() - self.output.last_view >= self._view_period:
             self.output.publish_views()
+
+    def _sensor_now(self, now: float) -> float:
+        """The sensor time at node-clock time ``now``: ``now`` plus the largest (stamp - node
+        clock) of the recent inputs (the sensor clock less the quickest input's delay)."""
+        return now + max(self._ahead) if self._ahead else now
+
+    def _on_clock(self) -> None:
+        """output_delay_s: the fixed-rate output up to the sensor time now, less the delay."""
+        if self._ahead:
+            now, _ = self._now()
+            self._move_output(self._sensor_now(now) - self._out_delay)
+
+    def _move_output(self, t: float) -> None:
+        """The fixed-rate output moved on to ``t`` without input; the arrival schedule
+        records it, so that an offline run publishes the same epochs at the same point."""
+        out, moved = self.pipeline.stall(t)
+        if moved is None:
+            return
+        arrivals = self.input.arrivals
+        if arrivals is not None and (out.grid or out.tracks):
+            arrivals.add(CLOCK, moved)
+        self.output.publish(out)
 
     def destroy_node(self) -> None:
         try:

@@ -175,17 +175,21 @@ class Pipeline:
         self._finish()
         return self._take()
 
-    def stall(self, t: float) -> Outputs:
-        """The inputs stalled: the fixed-rate output predicted up to ``t``, forward from the
-        processed time and at most ``max_coast_s`` (60 s without one) past it."""
+    def stall(self, t: float) -> tuple[Outputs, float | None]:
+        """Time has come to ``t`` without input (the inputs stalled, or the node's clock moves
+        the output on): the fixed-rate output predicted up to ``t``, forward from the
+        processed time and at most ``max_coast_s`` (60 s without one) past it; nothing while
+        measurements are held. Returns the outputs and the time the output was moved to (None:
+        not moved), which an arrival schedule records."""
         if not math.isfinite(self.processed_t) or self.pending or self.holding:
-            return Outputs()
+            return Outputs(), None
         cap = self.estimator.profile.max_coast_s
         target = min(t, self.processed_t + (cap if cap is not None else STALL_CAP_S))
         if target <= self.processed_t:
-            return Outputs()
+            return Outputs(), None
         rw = self.rewinder
-        return rw.advance(target) if rw is not None else self._estimator.advance(target)
+        out = rw.advance(target) if rw is not None else self._estimator.advance(target)
+        return out, target
 
     def check_clock(self, clock: float | None) -> None:
         """Note the simulated clock (None: no clock); a backwards jump restarts the timeline."""

@@ -31,6 +31,7 @@ from typing import Any
 from uav_fusion.core.estimators.base import Estimator
 from uav_fusion.core.estimators.grid import Outputs
 from uav_fusion.core.estimators.steps import Step
+from uav_fusion.core.live.schedule import Arrival, ClockTick
 from uav_fusion.core.records import RADAR, RadarFrame, RfAttempt
 
 Item = RadarFrame | RfAttempt
@@ -273,18 +274,22 @@ class Published:
 
 def simulate(
     make: Callable[[], Estimator],
-    arrivals: list[tuple[str, Item]],
+    arrivals: list[Arrival],
     max_lag_s: float = 10.0,
 ) -> tuple[list[Outputs], Rewinder, list[Published]]:
     """``arrivals`` (source, input) fused in that order by a fresh :class:`Rewinder` (what a
     zero-wait pipeline does live): what it passed on after each arrival (the last entry:
     after the end of the input), the rewinder (its :attr:`Rewinder.steps` are the final,
     re-filtered track), and every step passed on with its measurement's position. An arrival
-    beyond ``max_lag_s`` passes nothing on."""
+    beyond ``max_lag_s`` passes nothing on; a :class:`~uav_fusion.core.live.schedule.ClockTick`
+    passes on the fixed-rate epochs up to its time."""
     rw = Rewinder(make(), max_lag_s)
     outs = []
     published: list[Published] = []
     for source, item in arrivals:
+        if isinstance(item, ClockTick):
+            outs.append(rw.advance(item.t))
+            continue
         got = rw.fuse(source, item.t, item)
         out = got if got is not None else Outputs()
         for st in out.steps:

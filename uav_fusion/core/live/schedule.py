@@ -7,7 +7,10 @@ in that order and reproduces what the live graph published at each moment.
 
 A schedule file is CSV with the header ``source,stamp,arrival``: ``radar`` or ``rf``, the
 input's sensor stamp and its arrival time (UTC seconds, or any clock: only the order counts).
-:func:`delayed` makes one from per-source delays and jitter instead.
+A ``clock`` row says that the node's clock moved the fixed-rate output on to the sensor time
+in ``stamp`` without an input (the fusion node's ``output_delay_s``): an offline run
+publishes the epochs up to there at that point (:class:`ClockTick`). :func:`delayed` makes a
+schedule from per-source delays and jitter instead.
 """
 
 from __future__ import annotations
@@ -17,13 +20,24 @@ import math
 import random
 from collections import defaultdict, deque
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 from uav_fusion.core.errors import ConfigError, DataError
 from uav_fusion.core.records import RADAR, RF, RadarFrame, RfAttempt
 
+CLOCK = "clock"
+
+
+@dataclass(frozen=True, slots=True)
+class ClockTick:
+    """The fixed-rate output moved on to sensor time ``t`` by the clock, without an input."""
+
+    t: float
+
+
 Item = RadarFrame | RfAttempt
-Arrival = tuple[str, Item]
+Arrival = tuple[str, Item | ClockTick]
 SOURCES = (RADAR, RF)
 HEADER = ("source", "stamp", "arrival")
 
@@ -69,14 +83,14 @@ def delayed(
 
 
 def read_schedule(path: str | Path, items: Iterable[Item]) -> list[Arrival]:
-    """The inputs in the order a schedule file says they arrived (see the module text).
-    Every row must name an input of ``items`` (by source and stamp); inputs without a row
-    never arrived."""
+    """The inputs in the order a schedule file says they arrived, with the clock's moves of
+    the output among them (see the module text). Every input row must name an input of
+    ``items`` (by source and stamp); inputs without a row never arrived."""
     p = Path(path)
     by_key: dict[tuple[str, float], deque[Item]] = defaultdict(deque)
     for it in items:
         by_key[(source_of(it), it.t)].append(it)
-    rows: list[tuple[float, int, str, Item]] = []
+    rows: list[tuple[float, int, str, Item | ClockTick]] = []
     try:
         fh = p.open(newline="", encoding="utf-8")
     except OSError as exc:
@@ -94,8 +108,11 @@ def read_schedule(path: str | Path, items: Iterable[Item]) -> list[Arrival]:
                 stamp, at = float(row[1]), float(row[2])
             except ValueError:
                 raise DataError(p, line, "stamp and arrival must be numbers") from None
-            if src not in SOURCES or not (math.isfinite(stamp) and math.isfinite(at)):
+            if src not in (*SOURCES, CLOCK) or not (math.isfinite(stamp) and math.isfinite(at)):
                 raise DataError(p, line, f"bad row {row!r}")
+            if src == CLOCK:
+                rows.append((at, line, src, ClockTick(stamp)))
+                continue
             queue = by_key.get((src, stamp))
             if not queue:
                 raise DataError(p, line, f"no {src} input of the flight is stamped {stamp!r}")
