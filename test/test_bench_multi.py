@@ -35,7 +35,7 @@ from uav_fusion.core.records import Flight, TruthFix
 from uav_fusion.core.scoring.gospa import (
     EpochTracks,
     MultiScoreSettings,
-    TrackEstimate,
+    PublishedTrack,
     UavTruth,
     pool,
     score_flight,
@@ -121,8 +121,8 @@ def test_id_switches_are_attributed_to_the_crossing_they_happen_at() -> None:
         epochs.append(
             EpochTracks(
                 t0 + k,
-                (TrackEstimate(on_a, np.r_[pa, 0.0, 0.0, 0.0]),
-                 TrackEstimate(on_b, np.r_[pb, 0.0, 0.0, 0.0])),
+                (PublishedTrack(on_a, np.r_[pa, 0.0, 0.0, 0.0]),
+                 PublishedTrack(on_b, np.r_[pb, 0.0, 0.0, 0.0])),
             )
         )  # fmt: skip
     samples = score_flight(truths, epochs)

@@ -16,7 +16,7 @@ from uav_fusion.core.scoring.gospa import (
     EpochTracks,
     GospaSettings,
     MultiScoreSettings,
-    TrackEstimate,
+    PublishedTrack,
     UavTruth,
     gospa,
     pool,
@@ -261,8 +261,8 @@ def _at(tr: UavTruth, t: float) -> np.ndarray:
 
 def _est(
     tid: int, pos: np.ndarray, off: tuple[float, float, float] = (0.0, 0.0, 0.0)
-) -> TrackEstimate:
-    return TrackEstimate(tid, np.r_[pos + np.array(off), 0.0, 0.0, 0.0])
+) -> PublishedTrack:
+    return PublishedTrack(tid, np.r_[pos + np.array(off), 0.0, 0.0, 0.0])
 
 
 def test_flight_coverage_errors_switches_and_false_time() -> None:
@@ -270,7 +270,7 @@ def test_flight_coverage_errors_switches_and_false_time() -> None:
     epochs = []
     for k in range(11):  # 1 Hz, T0 .. T0 + 10
         t = T0 + k
-        tracks: list[TrackEstimate] = []
+        tracks: list[PublishedTrack] = []
         # uav "a": track 1 at 3 m error, lost at epochs 5-6, back as track 2 from 7 on
         if k not in (5, 6):
             tracks.append(_est(1 if k < 5 else 2, _at(a, t), (3.0, 0.0, 0.0)))
@@ -450,7 +450,7 @@ def test_flight_bad_input_is_a_clear_error() -> None:
         p = _at(a, T0 + 1)
         score_flight({"a": a}, [EpochTracks(T0 + 1, (_est(3, p), _est(3, p)))])
     with pytest.raises(ValueError, match="track 4 has no finite ENU position"):
-        score_flight({"a": a}, [EpochTracks(T0, (TrackEstimate(4, np.array([1.0, 2.0])),))])
+        score_flight({"a": a}, [EpochTracks(T0, (PublishedTrack(4, np.array([1.0, 2.0])),))])
     with pytest.raises(ValueError, match="truth of 'x': times must be strictly increasing"):
         score_flight({"x": UavTruth(np.array([1.0, 1.0]), np.zeros((2, 3)))}, [])
     with pytest.raises(ValueError, match="airborne mask has shape"):

@@ -16,42 +16,23 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from uav_fusion.core.data.uav_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.estimators.adaptive import HELD_S
 from uav_fusion.core.estimators.parts import alignment_from_site
 from uav_fusion.core.records import Flight
-from uav_fusion.core.scoring.gospa import pool
+from uav_fusion.core.scoring.gospa import EpochTracks, PublishedTrack, pool
 from uav_fusion.core.scoring.outcomes import UavSamples
 from uav_fusion.core.site import Site
 
 if TYPE_CHECKING:
     from uav_fusion.core.bench.multi import MultiFlightResult
 
-FloatArray = npt.NDArray[np.float64]
-
 #: the baseline's name where the benchmark lists profiles
 NAME = "radar"
-
-
-@dataclass(frozen=True, slots=True)
-class PassedTrack:
-    """One radar report at an epoch: the radar's track id and its state (ENU position and
-    velocity)."""
-
-    track_id: int
-    x: FloatArray
-
-
-@dataclass(frozen=True, slots=True)
-class PassedEpoch:
-    t: float
-    tracks: tuple[PassedTrack, ...]
 
 
 def radar_epochs(
@@ -61,12 +42,12 @@ def radar_epochs(
     t0: float,
     t1: float,
     min_uav_prob: float = DEFAULT_MIN_MEAN_UAV_PROB,
-) -> list[PassedEpoch]:
+) -> list[EpochTracks]:
     """The baseline's tracks at every epoch ``k / grid_hz`` in ``[t0, t1]`` (see the module
     text)."""
     frames = sorted(flight.radar, key=lambda fr: fr.t)
     align = alignment_from_site(site)
-    out: list[PassedEpoch] = []
+    out: list[EpochTracks] = []
     j = -1
     k = math.ceil(t0 * grid_hz)
     while k / grid_hz < t0:
@@ -74,7 +55,7 @@ def radar_epochs(
     while (t := k / grid_hz) <= t1:
         while j + 1 < len(frames) and frames[j + 1].t <= t:
             j += 1
-        tracks: list[PassedTrack] = []
+        tracks: list[PublishedTrack] = []
         if j >= 0 and t - frames[j].t <= HELD_S:
             for trk in frames[j].tracks:
                 p = trk.uav_prob
@@ -88,8 +69,8 @@ def radar_epochs(
                 dt = t - trk.t
                 x = np.array([e + ve * dt, n + vn * dt, u + vu * dt, ve, vn, vu], dtype=float)
                 if np.all(np.isfinite(x)):
-                    tracks.append(PassedTrack(trk.track_id, x))
-        out.append(PassedEpoch(t, tuple(tracks)))
+                    tracks.append(PublishedTrack(trk.track_id, x))
+        out.append(EpochTracks(t, tuple(tracks)))
         k += 1
     return out
 

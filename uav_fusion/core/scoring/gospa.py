@@ -210,7 +210,7 @@ class EpochLike(Protocol):
 
 
 @dataclass(frozen=True)
-class TrackEstimate:
+class PublishedTrack:
     """A published track: id, state ``x`` (position ENU first; at least 3 values), optionally
     its covariance and UAV probability (not used by the scores)."""
 
@@ -223,7 +223,7 @@ class TrackEstimate:
 @dataclass(frozen=True)
 class EpochTracks:
     t: float
-    tracks: tuple[TrackEstimate, ...]
+    tracks: tuple[PublishedTrack, ...]
 
 
 @dataclass(frozen=True)
@@ -520,7 +520,7 @@ def epochs_from_published(
     return [
         EpochTracks(
             k / frequency_hz,
-            tuple(TrackEstimate(tid, x) for tid, x in sorted(per.get(k, {}).items())),
+            tuple(PublishedTrack(tid, x) for tid, x in sorted(per.get(k, {}).items())),
         )
         for k in range(k0, k1 + 1)
     ]
