@@ -48,7 +48,7 @@ from uav_fusion.ros.app import run_node
 from uav_fusion.ros.conversions import ns_to_time
 from uav_fusion.ros.fusion_input import ArrivalLog, FusionInput, InputTopics
 from uav_fusion.ros.fusion_output import FusionOutput, OutputTopics, ViewSettings
-from uav_fusion.ros.params import Param, declare_all, not_empty, positive
+from uav_fusion.ros.params import Param, declare_all, positive, topic_param
 from uav_fusion.ros.qos import stream_qos
 
 NODE_NAME = "fusion_node"
@@ -62,9 +62,7 @@ def _stamp_key(msg: Any) -> tuple[int, int]:
 
 
 def fusion_params() -> list[Param]:
-    def topic(name: str, default: str, what: str) -> Param:
-        return Param(name, default, what, check=not_empty)
-
+    topic = topic_param  # a topic name: must not be empty
     return [
         Param("profile", "paper", "estimator profile: a name under config/profiles or a path"),
         Param("site_file", "", "site YAML ('' = bundled Lake Wheeler site)"),

@@ -38,8 +38,8 @@ from uav_fusion.core.estimators.selection import (
 )
 from uav_fusion.core.profiles.model import SELECTIONS
 from uav_fusion.ros import conversions as cv
-from uav_fusion.ros.params import Param
-from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
+from uav_fusion.ros.params import Param, topic_param
+from uav_fusion.ros.replay import ReplayNode, run_replay
 
 NODE_NAME = "radar_replay"
 

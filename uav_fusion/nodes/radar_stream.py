@@ -34,8 +34,8 @@ from uav_fusion.core.estimators.selection import radar_profile, report_covarianc
 from uav_fusion.core.ingest.decode import Record
 from uav_fusion.core.records import RadarFrame
 from uav_fusion.ros import conversions as cv
-from uav_fusion.ros.params import Param
-from uav_fusion.ros.stream import StreamNode, run_stream, topic_param
+from uav_fusion.ros.params import Param, topic_param
+from uav_fusion.ros.stream import StreamNode, run_stream
 
 NODE_NAME = "radar_stream"
 

@@ -19,8 +19,8 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.ros.conversions import rf_attempt_to_msg, rf_attempts_to_cloud_msg
-from uav_fusion.ros.params import Param
-from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
+from uav_fusion.ros.params import rf_output_params
+from uav_fusion.ros.replay import ReplayNode, run_replay
 
 NODE_NAME = "rf_replay"
 
@@ -32,11 +32,7 @@ class RfReplay(ReplayNode):
         super().__init__(
             NODE_NAME,
             publish_clock=False,
-            extra=[
-                topic_param("rf_topic", "rf/fix", "PointStamped topic of the RF attempts"),
-                topic_param("rf_fixes_topic", "rf/fixes", "every attempt with its quality"),
-                Param("publish_fixes", True, "publish the attempts as PointCloud2 too"),
-            ],
+            extra=rf_output_params(),
             **kwargs,
         )
         self.pub = self.create_publisher(PointStamped, self.p["rf_topic"], self.qos)

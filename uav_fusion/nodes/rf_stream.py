@@ -25,8 +25,8 @@ from sensor_msgs.msg import PointCloud2
 from uav_fusion.core.ingest.decode import Record
 from uav_fusion.core.records import RfAttempt
 from uav_fusion.ros.conversions import rf_attempt_to_msg, rf_attempts_to_cloud_msg
-from uav_fusion.ros.params import Param
-from uav_fusion.ros.stream import StreamNode, run_stream, topic_param
+from uav_fusion.ros.params import rf_output_params
+from uav_fusion.ros.stream import StreamNode, run_stream
 
 NODE_NAME = "rf_stream"
 
@@ -40,11 +40,7 @@ class RfStream(StreamNode):
             "rf",
             clock_offset_warn_s=10.0,
             stale_s=30.0,
-            extra=[
-                topic_param("rf_topic", "rf/fix", "PointStamped topic of the RF attempts"),
-                topic_param("rf_fixes_topic", "rf/fixes", "every attempt with its quality"),
-                Param("publish_fixes", True, "publish the attempts as PointCloud2 too"),
-            ],
+            extra=rf_output_params(),
             **kwargs,
         )
         self.pub = self.create_publisher(PointStamped, self.p["rf_topic"], self.qos)

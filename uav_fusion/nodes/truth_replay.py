@@ -20,8 +20,8 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import NavSatFix
 
 from uav_fusion.ros.conversions import truth_to_navsatfix
-from uav_fusion.ros.params import Param
-from uav_fusion.ros.replay import ReplayNode, run_replay, topic_param
+from uav_fusion.ros.params import Param, topic_param
+from uav_fusion.ros.replay import ReplayNode, run_replay
 
 NODE_NAME = "truth_replay"
 

@@ -21,7 +21,8 @@ from sensor_msgs.msg import NavSatFix
 from uav_fusion.core.ingest.decode import Record
 from uav_fusion.core.records import TruthFix
 from uav_fusion.ros.conversions import truth_to_navsatfix
-from uav_fusion.ros.stream import StreamNode, run_stream, topic_param
+from uav_fusion.ros.params import topic_param
+from uav_fusion.ros.stream import StreamNode, run_stream
 
 NODE_NAME = "truth_stream"
 

@@ -135,3 +135,17 @@ def positive(value: Any) -> str | None:
 def not_empty(value: Any) -> str | None:
     """A check: the string must not be empty (topic names, frames)."""
     return None if str(value).strip() else "must not be empty"
+
+
+def topic_param(name: str, default: str, what: str) -> Param:
+    """A topic name (or frame id) parameter: a string that must not be empty."""
+    return Param(name, default, what, check=not_empty)
+
+
+def rf_output_params() -> list[Param]:
+    """The RF topics rf_replay and rf_stream publish alike."""
+    return [
+        topic_param("rf_topic", "rf/fix", "PointStamped topic of the RF attempts"),
+        topic_param("rf_fixes_topic", "rf/fixes", "every attempt with its quality"),
+        Param("publish_fixes", True, "publish the attempts as PointCloud2 too"),
+    ]

@@ -45,7 +45,7 @@ from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 from uav_fusion.ros.app import run_node
 from uav_fusion.ros.conversions import ns_to_time, stamp_from_time
-from uav_fusion.ros.params import Param, declare_all, not_empty
+from uav_fusion.ros.params import Param, declare_all
 from uav_fusion.ros.qos import CLOCK_QOS, stream_qos
 
 
@@ -117,10 +117,6 @@ def replay_params(publish_clock: bool) -> list[Param]:
             "stop the node once every message is published and acknowledged",
         ),
     ]
-
-
-def topic_param(name: str, default: str, what: str) -> Param:
-    return Param(name, default, what, check=not_empty)
 
 
 def load_replay_flight(flight_dir: str, site_file: str) -> tuple[Site, Flight]:

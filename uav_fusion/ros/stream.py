@@ -98,10 +98,6 @@ def stream_params(kind: str, *, clock_offset_warn_s: float, stale_s: float) -> l
     ]
 
 
-def topic_param(name: str, default: str, what: str) -> Param:
-    return Param(name, default, what, check=not_empty)
-
-
 class StreamNode(Node):
     """Base of the stream nodes: subclasses publish the records (:meth:`publish_records`)."""
 
