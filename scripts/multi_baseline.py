@@ -285,7 +285,7 @@ class Baseline:
         if max_cep is not None and att.cep is not None and att.cep > max_cep:
             self._drop("rf_cep")
             return None
-        R = packed_to_array(self.rf_r.r_for(att.cep, att.valid_sensors))
+        R = packed_to_array(self.rf_r.r_for(att.cep))
         return Detection(
             StateVector([att.e, att.n]),
             timestamp=to_datetime(att.t),

@@ -136,7 +136,7 @@ def test_rf_cep_scale_converges() -> None:
     """Fixes whose real sigma is 1.8x their CEP-derived sigma (spec scale 1): the scale ends
     within 20 %."""
     rng = np.random.default_rng(6)
-    spec = CepRfR(scale=1.0, floor_m=0.0, ref_sensors=4, exponent=0.0, fallback=(100.0, 0.0, 100.0))
+    spec = CepRfR(scale=1.0, floor_m=0.0, fallback=(100.0, 0.0, 100.0))
     ad = AdaptiveRfR(spec, window=300, bound=3.0)
     f = CvFilter((0.05, 0.05, 0.05))
     f.set_state([0.0, 1000.0, 60.0, 0.0, 0.0, 0.0], np.diag([400.0, 400.0, 100.0, 9.0, 9.0, 1.0]))
@@ -146,10 +146,10 @@ def test_rf_cep_scale_converges() -> None:
         s = 1.8 * cep / CEP_PER_SIGMA
         z = (float(rng.normal(0, s)), float(1000.0 + rng.normal(0, s)))
         ad.observe(z, *f.mean(), cep)
-        f.update(z, ad.r_for(cep, 4))
+        f.update(z, ad.r_for(cep))
     assert ad.scale.sigma == pytest.approx(1.8, rel=0.2)
     # the R of the next fix follows the estimate
-    v = ad.r_for(10.0, 4)[0]
+    v = ad.r_for(10.0)[0]
     assert math.sqrt(v) == pytest.approx(ad.scale.sigma * 10.0 / CEP_PER_SIGMA)
 
 

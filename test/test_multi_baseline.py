@@ -106,7 +106,7 @@ def test_detections_carry_our_r_and_the_same_drops(
     # RF: R from the CEP model; a CEP above max_cep_m dropped
     att = RfAttempt(11.0, 1, True, 0.0, 0.0, 5.0, 6.0, 9.0, 4, 4)
     rd = b.rf_detection(att)
-    expected2 = packed_to_array(rf_model_from_profile(profile).r_for(9.0, 4))
+    expected2 = packed_to_array(rf_model_from_profile(profile).r_for(9.0))
     np.testing.assert_allclose(np.asarray(rd.measurement_model.covar()), expected2, atol=0)
     assert profile.rf_max_cep_m is not None
     bad = RfAttempt(12.0, 2, True, 0.0, 0.0, 5.0, 6.0, profile.rf_max_cep_m + 1.0, 4, 4)

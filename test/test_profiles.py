@@ -35,6 +35,8 @@ FROZEN = json.loads((Path(__file__).parent / "data" / "profiles_e0ffabd.json").r
 MOVED = {
     "radar_az_bias_deg": "the site file's radar.calibration, refined online",
     "radar_el_bias_deg": "the site file's radar.calibration",
+    "rf_ref_sensors": "gone: the number of sensors does not enter the RF R",
+    "rf_sensor_exponent": "gone: it was fitted to 0",
 }
 
 

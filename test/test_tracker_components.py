@@ -132,14 +132,13 @@ def test_radar_alignment_of_a_frame_and_without_a_bias() -> None:
 
 
 def test_cep_r_hand_cases() -> None:
-    m = CepRfR(scale=2.0, floor_m=5.0, ref_sensors=4, exponent=1.0, fallback=(9.0, 0.0, 9.0))
-    s = 2.0 * 20.0 / CEP_PER_SIGMA  # CEP 20 m, 4 sensors
-    assert m.r_for(20.0, 4) == pytest.approx((s * s, 0.0, s * s))
-    s3 = s * 4 / 3  # three sensors: trusted less
-    assert m.r_for(20.0, 3) == pytest.approx((s3 * s3, 0.0, s3 * s3))
-    assert m.r_for(1.0, 4) == pytest.approx((25.0, 0.0, 25.0))  # the floor
-    assert m.r_for(None, 4) == (9.0, 0.0, 9.0)  # no CEP: the fallback
-    assert m.r_for(0.0, 4) == (9.0, 0.0, 9.0)
+    m = CepRfR(scale=2.0, floor_m=5.0, fallback=(9.0, 0.0, 9.0))
+    s = 2.0 * 20.0 / CEP_PER_SIGMA  # CEP 20 m
+    assert m.r_for(20.0) == pytest.approx((s * s, 0.0, s * s))
+    assert m.r_for(1.0) == pytest.approx((25.0, 0.0, 25.0))  # the floor
+    assert m.r_for(None) == (9.0, 0.0, 9.0)  # no CEP: the fallback
+    assert m.r_for(0.0) == (9.0, 0.0, 9.0)
+    assert m.r_for(float("nan")) == (9.0, 0.0, 9.0)
 
 
 # --- robust weights -------------------------------------------------------------------------

@@ -187,7 +187,7 @@ class LabelOracle(MultiTracker):
             return
         t = att.t
         self._advance(t)
-        r = self.rf_r.r_for(att.cep, att.valid_sensors)
+        r = self.rf_r.r_for(att.cep)
         z = (att.e, att.n)
         tr = self._track_of(vehicle)
         if tr is None:  # as the tracker: an RF start is tentative, confirmed by M of N fixes

@@ -54,7 +54,7 @@ class Emitters:
         if max_cep is not None and att.cep is not None and att.cep > max_cep:
             mt._count("rejected_cep")
             return
-        r = mt.rf_r.r_for(att.cep, att.valid_sensors)
+        r = mt.rf_r.r_for(att.cep)
         z = (att.e, att.n)
         em = emitter_key(att.center_freq_hz)
         var = 0.5 * (r[0] + r[2])

@@ -58,9 +58,9 @@ class RadarRModel(Protocol):
 
 
 class RfRModel(Protocol):
-    """R (2x2, packed) of an RF fix with its CEP (m) and number of valid sensors."""
+    """R (2x2, packed) of an RF fix with its CEP (m)."""
 
-    def r_for(self, cep_m: float | None, valid_sensors: int | None) -> PackedR: ...
+    def r_for(self, cep_m: float | None) -> PackedR: ...
 
 
 @dataclass(frozen=True)
@@ -80,8 +80,8 @@ class FixedRfR:
 
     r: PackedR
 
-    def r_for(self, cep_m: float | None, valid_sensors: int | None) -> PackedR:
-        del cep_m, valid_sensors
+    def r_for(self, cep_m: float | None) -> PackedR:
+        del cep_m
         return self.r
 
 
@@ -211,26 +211,21 @@ class RadarAlignment:
 
 @dataclass(frozen=True)
 class CepRfR:
-    """R of an RF fix from its CEP and its number of valid sensors.
+    """R of an RF fix from its CEP.
 
-    ``sigma = max(floor_m, scale * CEP / 1.1774) * (ref_sensors / valid_sensors) ** exponent``
-    per axis (``R = sigma^2 I``): the CEP of the solver's geometry says how well the fix is
-    conditioned; a fix from fewer sensors has no redundancy to catch a non-line-of-sight
-    range, so it is trusted less. A fix without a CEP uses ``fallback``.
+    ``sigma = max(floor_m, scale * CEP / 1.1774)`` per axis (``R = sigma^2 I``): the CEP of
+    the solver's geometry says how well the fix is conditioned. A fix without a CEP uses
+    ``fallback``.
     """
 
     scale: float
     floor_m: float
-    ref_sensors: int
-    exponent: float
     fallback: PackedR
 
-    def r_for(self, cep_m: float | None, valid_sensors: int | None) -> PackedR:
+    def r_for(self, cep_m: float | None) -> PackedR:
         if cep_m is None or not math.isfinite(cep_m) or cep_m <= 0:
             return self.fallback
         s = max(self.floor_m, self.scale * cep_m / CEP_PER_SIGMA)
-        if valid_sensors is not None and valid_sensors > 0 and self.exponent != 0.0:
-            s *= (self.ref_sensors / valid_sensors) ** self.exponent
         v = s * s
         return (v, 0.0, v)
 
@@ -392,8 +387,6 @@ def rf_model_from_profile(profile: Profile) -> RfRModel:
         return CepRfR(
             profile.rf_cep_scale,
             profile.rf_floor_m,
-            profile.rf_ref_sensors,
-            profile.rf_sensor_exponent,
             fixed,
         )
     return FixedRfR(fixed)

@@ -470,7 +470,7 @@ class Tracker:
         # object it fits best (its gate grows with the CEP)
         if coarse and not (a.cep is not None and a.cep <= self.cfg.rf_support_max_cep_m):
             return [self._step(t, RF, DISCARDED, "cep", None, z, None)]
-        r = self.rf_r.r_for(a.cep, a.valid_sensors)
+        r = self.rf_r.r_for(a.cep)
         var = 0.5 * (r[0] + r[2])
         self.objects.rf_fix(t, a.e, a.n, var)
         obj = self.objects.credited

@@ -92,8 +92,6 @@ class Profile:
     rf_model: str = "fixed"  # fixed (r_rf) | cep
     rf_cep_scale: float = 1.0
     rf_floor_m: float = 5.0
-    rf_ref_sensors: int = 4
-    rf_sensor_exponent: float = 0.0
     rf_max_cep_m: float | None = None  # RF fixes with a larger CEP are discarded
     robust: str = "none"  # none | student_t | huber
     robust_dof: float = 4.0

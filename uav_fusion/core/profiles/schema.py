@@ -160,16 +160,12 @@ _MEASUREMENT = (
        fit="uav_fusion estimate-r --write-profile"),
     *_group("measurement.rf", TRACKER,
         _k("model", "rf_model", CHOICE, DESIGN, "fixed: R for every fix; cep: sigma = max("
-           "floor_m, cep_scale CEP / 1.1774) (ref_sensors / valid_sensors)^sensor_exponent",
+           "floor_m, cep_scale CEP / 1.1774)",
            choices=("fixed", "cep")),
         _k("cep_scale", "rf_cep_scale", NUMBER, FITTED, "cep model: the fix's CEP is scaled "
            "by this", bounds="> 0", fit=CALIBRATE),
         _k("floor_m", "rf_floor_m", NUMBER, FITTED, "cep model: smallest sigma per axis",
            unit="m", bounds=">= 0", fit=CALIBRATE),
-        _k("ref_sensors", "rf_ref_sensors", INTEGER, SPEC, "cep model: the sensor count a CEP "
-           "refers to", bounds=">= 1"),
-        _k("sensor_exponent", "rf_sensor_exponent", NUMBER, FITTED, "cep model: how much "
-           "fewer valid sensors widen the sigma", fit=CALIBRATE),
         _k("max_cep_m", "rf_max_cep_m", NUMBER, FITTED, "fixes with a larger CEP are discarded "
            "(mostly non-line-of-sight)", unit="m", bounds="> 0", null="none discarded",
            fit=CALIBRATE),
