@@ -15,6 +15,7 @@ from uav_fusion.core.estimators.gates import FAR_SIGMAS, PhysicalGates
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.steps import TrackerStep
 from uav_fusion.core.estimators.tracker import Tracker
+from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
@@ -83,6 +84,13 @@ def _started_on(steps: list[TrackerStep], track_id: int) -> list[TrackerStep]:
     return [s for s in steps if s.status in ("initialised", "reset") and s.track_id == track_id]
 
 
+def _profile() -> Profile:
+    """The tracker profile with the 3 s class history these scenes are timed for (an object
+    classed UAV from its first report reaches the start threshold within a second or two;
+    the gates under test do not depend on it)."""
+    return load_profile("tracker").with_keys({"association.class.tau_s": 3.0})
+
+
 def _far_point(sc: Scene, dist: float) -> np.ndarray:
     """A point ``dist`` from where the UAV was lost, across the radar (900 m beyond it for
     1500 m: inside the range gate, where new tracks start)."""
@@ -97,7 +105,7 @@ def test_after_a_reset_a_ground_object_far_from_the_last_state_never_starts_the_
     sc = _lost_uav(site)
     # 1.5 km from the last state; it appears 60 s later, when the UAV could be there (30 m/s)
     stream = _with_ground_object(sc, _far_point(sc, 1500.0), start=LOST_AT + 60.0)
-    tr = Tracker(load_profile("tracker"), site)
+    tr = Tracker(_profile(), site)
     steps = run_tracker(tr, stream)
     assert tr.counters.get("reinit_max_coast") == 1 and tr.gates.airborne
     assert not _started_on(steps, GROUND_ID)
@@ -106,7 +114,7 @@ def test_after_a_reset_a_ground_object_far_from_the_last_state_never_starts_the_
     assert refused and refused[0].status == "discarded"
     # the rule decides: without it, the young object, classed UAV, starts the track
     monkeypatch.setattr(PhysicalGates, "grounded", lambda self, obj: False)
-    steps = run_tracker(Tracker(load_profile("tracker"), site), stream)
+    steps = run_tracker(Tracker(_profile(), site), stream)
     assert _started_on(steps, GROUND_ID)
 
 
@@ -115,7 +123,7 @@ def test_radar_and_rf_agreeing_corroborate_a_ground_object(site: Site) -> None:
     at = _far_point(sc, 1500.0)
     # the emitter is there (the UAV landed): an RF fix credited to the object corroborates it
     stream = _with_ground_object(sc, at, start=LOST_AT + 60.0, rf_from=LOST_AT + 62.0)
-    tr = Tracker(load_profile("tracker"), site)
+    tr = Tracker(_profile(), site)
     steps = run_tracker(tr, stream)
     # the first fix starts a tentative RF track; the object inside its gate confirms it
     assert tr.counters["init_refused_ground"] >= 1 and tr.counters["confirmed"] == 1
@@ -139,7 +147,7 @@ def test_an_object_the_uav_cannot_have_reached_starts_the_track_only_once_it_cou
             f = RadarFrame(f.t, (*f.tracks, g))
         frames.append(f)
     sc.frames = frames
-    tr = Tracker(load_profile("tracker"), site)
+    tr = Tracker(_profile(), site)
     steps = run_tracker(tr, sc.stream())
     assert tr.counters["init_refused_unreachable"] > 0
     (start,) = _started_on(steps, GROUND_ID)
@@ -149,7 +157,7 @@ def test_an_object_the_uav_cannot_have_reached_starts_the_track_only_once_it_cou
     assert reach >= dist - 30.0  # it started once the UAV could be there ...
     assert 30.0 * (start.t - 1.0 - anchor_t) + 200.0 < dist + 30.0  # ... and not long before
     monkeypatch.setattr(PhysicalGates, "reachable", lambda self, t, e, n: True)
-    early = _started_on(run_tracker(Tracker(load_profile("tracker"), site), sc.stream()),
+    early = _started_on(run_tracker(Tracker(_profile(), site), sc.stream()),
                         GROUND_ID)  # fmt: skip
     assert early and early[0].t < start.t - 5.0
 
@@ -166,7 +174,7 @@ def test_the_reach_gate_at_its_edge() -> None:
 
 
 def test_the_takeover_reach_gate_at_its_edge(site: Site) -> None:
-    tr = Tracker(load_profile("tracker"), site)
+    tr = Tracker(_profile(), site)
     assert tr.cfg.reach_margin_m == 200.0 and tr.profile.max_speed_mps == 30.0
     tr._last_pos, tr.last_update_t = (100.0, -50.0), 20.0
     # a takeover candidate 30 m/s x 10 s + 200 m from the last update
@@ -189,7 +197,7 @@ def _coast_then_fix(
     if second:
         at2 = at + 3.0
         sc.fixes.append(RfAttempt(t1 + 4.0, 90_001, True, 0.0, 0.0, *map(float, at2), 5.0, 4, 4))
-    tr = Tracker(load_profile("tracker"), site)
+    tr = Tracker(_profile(), site)
     return tr, run_tracker(tr, sc.stream())
 
 
@@ -272,7 +280,7 @@ def test_a_track_on_a_decoy_is_dropped_when_the_rf_fixes_say_the_uav_is_elsewher
         return scene.report(t, GROUND_ID, p, 0.9, vel)
 
     sc.build(60.0, uav_visible=lambda t: False, decoy=decoy)
-    tr = Tracker(load_profile("tracker"), site)
+    tr = Tracker(_profile(), site)
     steps = run_tracker(tr, sc.stream())
     start = next(s for s in steps if s.status == "initialised")
     assert start.track_id == GROUND_ID and start.t == 2.0
@@ -285,7 +293,7 @@ def test_a_track_on_a_decoy_is_dropped_when_the_rf_fixes_say_the_uav_is_elsewher
     assert tr.counters["reinit_rf_disagrees"] >= 1 and sc.error(rf[2]) < 30.0
     # the rule decides: without it the track stays on the decoy, 300 m off, all along
     monkeypatch.setattr(PhysicalGates, "rf_outside", lambda self, *a: False)
-    tr = Tracker(load_profile("tracker"), site)
+    tr = Tracker(_profile(), site)
     steps = run_tracker(tr, sc.stream())
     assert "reinit_rf_disagrees" not in tr.counters
     assert min(sc.error(s) for s in steps if s.counted and s.t > start.t) > 250.0

@@ -745,6 +745,8 @@ def test_a_far_young_radar_track_has_its_class_read_for_its_range(site: Site) ->
             reps.append(dataclasses.replace(r, uav_prob=1.0 / (1.0 + math.exp(-logit))))
         return dataclasses.replace(item, tracks=tuple(reps))
 
+    # the scene is timed for a 3 s class history (the rule under test does not depend on it)
+    prof = load_profile("tracker").with_keys({"association.class.tau_s": 3.0})
     for seed in (1, 2):
         stream = scene_stream(site, [Uav(path, 10, seen=lambda tau: tau >= 10.0)], 60.0, seed)
         stream = [classifier(item) for item in stream]
@@ -752,7 +754,7 @@ def test_a_far_young_radar_track_has_its_class_read_for_its_range(site: Site) ->
         for scale in (3000.0, None):
             settings = MultiSettings(class_range_scale_m=scale)
             epochs = run_multi(
-                MultiTracker(load_profile("tracker"), site, settings), stream, 1.0, 1000.0, 1059.0
+                MultiTracker(prof, site, settings), stream, 1.0, 1000.0, 1059.0
             )
             on_uav = [ep.t - 1000.0 for ep in epochs if _near(site, ep, path)]
             first[scale] = on_uav[0]

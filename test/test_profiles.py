@@ -37,7 +37,34 @@ MOVED = {
     "radar_el_bias_deg": "the site file's radar.calibration",
     "rf_ref_sensors": "gone: the number of sensors does not enter the RF R",
     "rf_sensor_exponent": "gone: it was fitted to 0",
+    "score.ground_release_sigmas": "gone: the rule changed no tune flight of either benchmark",
 }
+# Values refitted since (the tracker's, on the tune halves of the accuracy and worlds
+# benchmarks; docs/estimator.md says with what).
+RETUNED: dict[str, dict[str, Any]] = {"tracker": {"score.class_tau_s": 5.0}}
+
+
+def _without(fields: dict[str, Any], paths: Any) -> dict[str, Any]:
+    """``fields`` without the (possibly dotted: ``score.x``) attributes ``paths``."""
+    out = json.loads(json.dumps(fields))
+    for path in paths:
+        *head, last = path.split(".")
+        d = out
+        for part in head:
+            d = d[part]
+        d.pop(last, None)
+    return out
+
+
+def _set(fields: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
+    out = json.loads(json.dumps(fields))
+    for path, v in values.items():
+        *head, last = path.split(".")
+        d = out
+        for part in head:
+            d = d[part]
+        d[last] = v
+    return out
 
 
 def _plain(v: Any) -> Any:
@@ -58,7 +85,9 @@ ADDED = {"adaptive_window": None, "adaptive_bound": 2.0}
 
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_profiles_resolve_to_the_values_they_had(name: str) -> None:
-    then = {k: v for k, v in FROZEN[name].items() if k not in MOVED}
+    then = _set(_without(FROZEN[name], MOVED), RETUNED.get(name, {}))
+    if name == "tracker_smoothed":  # it extends the tracker
+        then = _set(then, RETUNED["tracker"])
     now = _fields(load_profile(name))
     assert {k: now.pop(k) for k in ADDED} == ADDED
     assert now == then
@@ -248,9 +277,9 @@ def test_estimator_multi_is_a_tracker_profile(tmp_path: Path) -> None:
 
 def test_with_keys_sets_keys_by_path_and_checks_them() -> None:
     p = load_profile("tracker")
-    q = p.with_keys({"association.class.tau_s": 5.0, "multi.merge_s": 2.0, "motion.q": (1.0,) * 3})
-    assert (q.score.class_tau_s, q.multi.merge_s, q.q) == (5.0, 2.0, (1.0, 1.0, 1.0))
-    assert q.score.follow_min == p.score.follow_min and p.score.class_tau_s == 3.0
+    q = p.with_keys({"association.class.tau_s": 7.0, "multi.merge_s": 2.0, "motion.q": (1.0,) * 3})
+    assert (q.score.class_tau_s, q.multi.merge_s, q.q) == (7.0, 2.0, (1.0, 1.0, 1.0))
+    assert q.score.follow_min == p.score.follow_min and p.score.class_tau_s == 5.0
     with pytest.raises(ConfigError, match=r"association\.class\.min_weight must be a number in"):
         p.with_keys({"association.class.min_weight": 0.0})
     with pytest.raises(ConfigError, match=r"unknown key 'association\.class_tau_s'"):

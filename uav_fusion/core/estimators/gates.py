@@ -16,8 +16,8 @@ says so:
   an object near the ground and stationary is never the UAV without corroboration, however
   reachable: a parked vehicle, a mast or a reflector sits there for the whole flight. The
   object table's own terms decide: "near the ground" is a mean height below
-  ``ground_alt_m`` plus two of its reports' mean vertical sigmas, never having stood clearly
-  above it (:attr:`RadarObject.aloft`); "stationary" is a mean speed below
+  ``ground_alt_m`` plus two of its reports' mean vertical sigmas; "stationary" is a mean
+  speed below
   ``stationary_speed_mps``. The track is airborne once a confirmed state stood more than
   ``ground_alt_m`` plus two of its own vertical sigmas up.
 * **RF-only moves.** An RF fix that would move the track further than three of the fix's own
@@ -108,7 +108,7 @@ class PhysicalGates:
     def grounded(self, obj: RadarObject) -> bool:
         """Whether ``obj`` is near the ground and stationary (the object table's averages)."""
         cfg = self.cfg
-        low = not obj.aloft and obj.up < cfg.ground_alt_m + 2.0 * obj.sd_up
+        low = obj.up < cfg.ground_alt_m + 2.0 * obj.sd_up
         return low and obj.speed < cfg.stationary_speed_mps
 
     def refuse_start(self, obj: RadarObject, t: float, e: float, n: float) -> str | None:

@@ -27,10 +27,7 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   ground vehicle (``-ground_weight``) if its mean RCS is at least ``vehicle_min_rcs_dbsm``
   (a car is a large radar target; a small UAV taking off, or flying low far out where its
   reports scatter around the ground, is not; the default -100 dBsm takes every object, and
-  one without RCS reports counts as large), unless its mean height has once stood more than
-  ``ground_release_sigmas`` (0: off) times its reports' mean vertical standard deviation
-  above ``ground_alt_m`` (:attr:`RadarObject.aloft`: a car never climbs, while a UAV flying
-  low far out has reports that scatter around the ground after it was seen in the air); one
+  one without RCS reports counts as large); one
   whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
   ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
   bird (``-erratic_weight``);
@@ -93,7 +90,6 @@ class RadarObject:
     """One radar track id: its own CV filter and the running evidence of the UAV score."""
 
     __slots__ = (
-        "aloft",
         "class_logit",
         "coasting",
         "first_t",
@@ -137,7 +133,6 @@ class RadarObject:
         self.fused_t: float | None = None
         self.signature: tuple[object, ...] | None = None
         self.coasting = False
-        self.aloft = False  # its mean height once stood clearly above ground_alt_m
 
     @property
     def age_s(self) -> float:
@@ -167,7 +162,6 @@ class RadarObject:
         elif (
             self.up < cfg.ground_alt_m
             and self.n_reports > 1
-            and not self.aloft
             and self.rcs_mean >= cfg.vehicle_min_rcs_dbsm
         ):
             s -= cfg.ground_weight
@@ -309,9 +303,7 @@ class ObjectTable:
     ) -> None:
         """Fold a report after the first into the object's moving averages of speed, height,
         vertical sigma (``r_uu``: the report's vertical variance) and RCS, with the
-        smoothing factor ``a`` of the interval, and note when it has risen clear of the
-        ground."""
-        cfg = self.cfg
+        smoothing factor ``a`` of the interval."""
         b = 1.0 - a
         obj.speed = a * obj.speed + b * spd
         obj.up = a * obj.up + b * u
@@ -322,9 +314,6 @@ class ObjectTable:
             else:
                 obj.rcs_mean = rcs
                 obj.rcs_seen = True
-        k = cfg.ground_release_sigmas
-        if k and not obj.aloft and obj.up - k * obj.sd_up > cfg.ground_alt_m:
-            obj.aloft = True
 
     def _fold_class(
         self, obj: RadarObject, trk: RadarTrack, p: float, dt: float, first: bool

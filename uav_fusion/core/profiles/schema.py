@@ -271,9 +271,6 @@ _ASSOCIATION = (
         _s("ground_alt_m", "ground_alt_m", NUMBER, PHYSICAL, "an object moving below this "
            "height ...", unit="m", bounds=">= 0"),
         _s("weight", "ground_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
-        _s("release_sigmas", "ground_release_sigmas", NUMBER, FITTED, "... unless its mean "
-           "height once stood this many vertical sigmas above ground_alt_m", bounds=">= 0",
-           fit=TUNED),
         _s("min_rcs_dbsm", "vehicle_min_rcs_dbsm", NUMBER, PHYSICAL, "... and only with a mean "
            "RCS of at least this (a car is a large target; -100: any)", unit="dBsm"),
     ),

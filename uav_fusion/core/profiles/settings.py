@@ -57,7 +57,6 @@ class ScoreConfig:
     stationary_weight: float = 5.0
     ground_alt_m: float = 4.0
     ground_weight: float = 3.0
-    ground_release_sigmas: float = 0.0
     vehicle_min_rcs_dbsm: float = -100.0  # -100: every low moving object may be a vehicle
     below_ground_m: float = 5.0
     below_ground_weight: float = 8.0
