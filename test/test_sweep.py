@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from uav_fusion.cli import main
-from uav_fusion.core.bench.sweep import load_spec, run_sweep_task, sweep_tasks
+from uav_fusion.core.bench.sweep import combo_label, load_spec, run_sweep_task, sweep_tasks
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
@@ -67,6 +67,7 @@ def _setup(tmp_path: Path, **changes: object) -> Path:
         ({"parameters": {"track.confirm_m": [9]}},
          r"spec.yaml: parameters \{'track.confirm_m': 9\}: .*paper.yaml: track.confirm_m and "),
         ({"metric": "happiness"}, r"spec.yaml: metric: one of"),
+        ({"mode": "random"}, r"spec.yaml: mode: one of grid, one_at_a_time expected, got 'random'"),
     ],
 )
 def test_bad_specs_stop_with_the_file_and_key(
@@ -81,6 +82,35 @@ def test_the_shipped_example_spec_is_valid_and_uses_tune_flights_only() -> None:
     assert spec.split == "tune"
     assert set(spec.seeds) == set(spec.definition.splits["tune"])
     assert len(spec.combinations()) == 6
+
+
+def test_one_at_a_time_varies_each_parameter_alone_against_the_profile_as_it_is(
+    tmp_path: Path,
+) -> None:
+    params = {"motion.q": [1.0, 4.0], "gating.nis_probability": [0.9]}
+    grid = load_spec(_setup(tmp_path, parameters=params))
+    assert len(grid.combinations()) == 2
+    spec = load_spec(_setup(tmp_path, parameters=params, mode="one_at_a_time"))
+    combos = spec.combinations()
+    assert combos[0] == {}  # the profile as it is, then each value alone
+    assert sorted(map(repr, combos[1:])) == sorted(map(repr, [
+        {"motion.q": (1.0, 1.0, 1.0)}, {"motion.q": (4.0, 4.0, 4.0)},
+        {"gating.nis_probability": 0.9},
+    ]))
+    tasks = sweep_tasks(spec, tmp_path / "cache", SITE_FILE, load_site(SITE_FILE))
+    assert len(tasks) == 2 * 4 and len({t.key for t in tasks}) == 8
+    labels = [combo_label(c) for c in combos]
+    assert labels[0] == "-" and "gating.nis_probability=0.9" in labels
+    assert combo_label({"update.robust": "none", "smoother.lag_s": None}) == (
+        "update.robust=none, smoother.lag_s=null")
+
+
+def test_the_shipped_rule_ablations_are_valid_and_use_tune_flights_only() -> None:
+    bench = Path(__file__).resolve().parent.parent / "bench"
+    for name in ("ablate_accuracy.yaml", "ablate_worlds.yaml"):
+        spec = load_spec(bench / name)
+        assert spec.split == "tune" and spec.mode == "one_at_a_time"
+        assert len(spec.combinations()) == 1 + sum(len(v) for v in spec.parameters.values())
 
 
 def test_task_keys_follow_the_inputs(tmp_path: Path) -> None:

@@ -86,8 +86,14 @@ _TOP_KEYS = (
     "families",
     "profiles",
     "parameters",
+    "mode",
     "metric",
 )
+
+#: How a sweep combines its parameters: ``grid``, every combination of their values;
+#: ``one_at_a_time``, the profiles as they are and then each value of each parameter alone
+#: (what each rule or setting buys, against the profile's own value).
+MODES = ("grid", "one_at_a_time")
 
 #: The kinds of profile key a sweep may vary (numbers, integers, true/false, choices, q).
 SWEEPABLE = (NUMBER, INTEGER, BOOL, CHOICE, Q3)
@@ -114,6 +120,7 @@ class SweepSpec:
     metric: str
     source: Path
     families: tuple[str, ...] | None = None  # world families in the sweep (None: no worlds)
+    mode: str = "grid"
 
     @property
     def metrics(self) -> tuple[str, ...]:
@@ -121,8 +128,12 @@ class SweepSpec:
         return MULTI_METRICS if self.definition.multi else METRICS
 
     def combinations(self) -> list[dict[str, Any]]:
-        """Every combination of the parameter values (one empty one without parameters)."""
+        """Every combination of the parameter values (one empty one without parameters); in
+        ``one_at_a_time`` mode the empty one (the profiles as they are) and each value of each
+        parameter alone."""
         names = list(self.parameters)
+        if self.mode == "one_at_a_time":
+            return [{}] + [{n: v} for n in names for v in self.parameters[n]]
         return [
             dict(zip(names, values, strict=True))
             for values in itertools.product(*(self.parameters[n] for n in names))
@@ -230,6 +241,9 @@ def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
     params: dict[str, tuple[Any, ...]] = {}
     for name, values in params_raw.items():
         params[str(name)] = _parameter(str(name), values, definition, src)
+    mode = doc.get("mode", "grid")
+    if mode not in MODES:
+        raise ConfigError(f"{src}: mode: one of {', '.join(MODES)} expected, got {mode!r}")
     metrics = MULTI_METRICS if definition.multi else METRICS
     metric = doc.get("metric", "gospa_mean_m" if definition.multi else "err_mean_m")
     if metric not in metrics:
@@ -246,6 +260,7 @@ def spec_from_dict(doc: Any, source: Path) -> SweepSpec:
         metric=metric,
         source=source,
         families=tuple(fams) if have_fams else None,
+        mode=mode,
     )
     # apply every combination to every profile once, so a value the profile refuses (e.g. a
     # q of the wrong sign) stops here, naming the spec and the parameter, not in a worker
@@ -460,7 +475,9 @@ def _value_label(v: Any) -> str:
         return "true" if v else "false"
     if isinstance(v, (list, tuple)):
         return str(v[0]) if len(set(v)) == 1 else "/".join(str(x) for x in v)
-    return "null" if v is None else f"{v:g}"
+    if v is None:
+        return "null"
+    return v if isinstance(v, str) else f"{v:g}"
 
 
 def combo_label(params: dict[str, Any]) -> str:
@@ -522,6 +539,14 @@ def write_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Pat
                     hi.append(math.nan)
             line = ax.plot(xs, med, marker="o", label=prof)[0]
             ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.15)
+            base = sorted(
+                float(r[spec.metric]) for r in rows
+                if r["profile"] == prof and not r["params"] and r.get(spec.metric) is not None
+                and math.isfinite(float(r[spec.metric]))
+            )
+            if spec.mode == "one_at_a_time" and base:  # the profile as it is
+                ax.axhline(base[len(base) // 2], color=line.get_color(), ls="--", lw=1,
+                           label=f"{prof} as it is")
         finite = [float(r[spec.metric]) for r in rows if r.get(spec.metric) is not None
                   and math.isfinite(float(r[spec.metric])) and float(r[spec.metric]) > 0]
         if finite and max(finite) > 20 * min(finite):
