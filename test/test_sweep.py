@@ -11,7 +11,13 @@ import pytest
 import yaml
 
 from uav_fusion.cli import main
-from uav_fusion.core.bench.sweep import combo_label, load_spec, run_sweep_task, sweep_tasks
+from uav_fusion.core.bench.sweep import (
+    combo_label,
+    load_spec,
+    run_sweep_task,
+    sweep_tasks,
+    write_figure,
+)
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
@@ -103,6 +109,11 @@ def test_one_at_a_time_varies_each_parameter_alone_against_the_profile_as_it_is(
     assert labels[0] == "-" and "gating.nis_probability=0.9" in labels
     assert combo_label({"update.robust": "none", "smoother.lag_s": None}) == (
         "update.robust=none, smoother.lag_s=null")
+    # the figure: a bar per changed setting, its change against the profile as it is
+    rows = [{"profile": "paper", "flight": f, "params": c, "err_mean_m": 10.0 + i}
+            for i, c in enumerate(combos) for f in ("a", "b")]
+    out = write_figure(rows, spec, tmp_path / "sweep.png")
+    assert out is not None and out.stat().st_size > 1000
 
 
 def test_the_shipped_rule_ablations_are_valid_and_use_tune_flights_only() -> None:

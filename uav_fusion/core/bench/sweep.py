@@ -511,6 +511,8 @@ def write_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if spec.mode == "one_at_a_time":
+        return _write_ablation_figure(rows, spec, path, plt)
     names = list(spec.parameters)
     fig, axes = plt.subplots(1, len(names), figsize=(5.5 * len(names), 4.2), squeeze=False)
     profiles = sorted({r["profile"] for r in rows})
@@ -539,14 +541,6 @@ def write_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Pat
                     hi.append(math.nan)
             line = ax.plot(xs, med, marker="o", label=prof)[0]
             ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.15)
-            base = sorted(
-                float(r[spec.metric]) for r in rows
-                if r["profile"] == prof and not r["params"] and r.get(spec.metric) is not None
-                and math.isfinite(float(r[spec.metric]))
-            )
-            if spec.mode == "one_at_a_time" and base:  # the profile as it is
-                ax.axhline(base[len(base) // 2], color=line.get_color(), ls="--", lw=1,
-                           label=f"{prof} as it is")
         finite = [float(r[spec.metric]) for r in rows if r.get(spec.metric) is not None
                   and math.isfinite(float(r[spec.metric])) and float(r[spec.metric]) > 0]
         if finite and max(finite) > 20 * min(finite):
@@ -562,6 +556,48 @@ def write_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Pat
         "(band: min to max)",
         fontsize=10,
     )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _write_ablation_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path,
+                           plt: Any) -> Path:
+    """One-at-a-time mode: per profile, how much each changed setting moves the metric's mean
+    over flights from the profile as it is (a bar per setting; red: worse)."""
+    profiles = sorted({r["profile"] for r in rows})
+    labels = [combo_label(c) for c in spec.combinations()[1:]]
+    fig, axes = plt.subplots(
+        1, len(profiles), figsize=(7.5 * len(profiles), 1.2 + 0.32 * len(labels)), squeeze=False
+    )
+    for ax, prof in zip(axes[0], profiles, strict=True):
+        means: dict[str, float] = {}
+        for label in ["-", *labels]:
+            vals = [
+                float(r[spec.metric]) for r in rows
+                if r["profile"] == prof and combo_label(r["params"]) == label
+                and r.get(spec.metric) is not None and math.isfinite(float(r[spec.metric]))
+            ]
+            means[label] = sum(vals) / len(vals) if vals else math.nan
+        base = means["-"]
+        ys = list(range(len(labels)))
+        deltas = [means[lab] - base for lab in labels]
+        colours = ["tab:red" if d > 0 else "tab:green" if d < 0 else "tab:gray" for d in deltas]
+        ax.barh(ys, deltas, color=colours, alpha=0.7)
+        ax.axvline(0.0, color="k", lw=1)
+        for y, d in zip(ys, deltas, strict=True):
+            if math.isfinite(d):
+                ax.annotate(f"{d:+.1f}", (d, y), fontsize=7, va="center",
+                            ha="left" if d >= 0 else "right")
+        ax.set_yticks(ys, labels, fontsize=7)
+        ax.invert_yaxis()
+        ax.set_title(f"{prof}: as it is {base:.1f}", fontsize=9)
+        ax.set_xlabel(f"change in {spec.metric} (mean over flights)")
+        ax.grid(True, axis="x", alpha=0.3)
+    n_fl = len({r["flight"] for r in rows})
+    fig.suptitle(f"sweep {spec.name}: one setting at a time, {n_fl} {spec.split} flights "
+                 "(red: worse than as it is)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
