@@ -5,7 +5,9 @@ from __future__ import annotations
 import csv
 import json
 import pickle
+import types
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -220,3 +222,29 @@ def test_bench_runs_on_an_existing_scheduler(
     assert f"Dask scheduler {cluster.scheduler_address} (1 workers)" in text
     with (tmp_path / "o" / "per_flight.csv").open() as fh:
         assert [r["flight"] for r in csv.DictReader(fh)] == ["zigzag_dash-s4"]
+
+
+def test_registration_is_judged_against_the_true_mount_within_the_tolerance_or_the_bound() -> None:
+    from uav_fusion.core.bench.report import registration_lines
+    from uav_fusion.core.bench.single import RegistrationOutcome
+
+    assert RegistrationOutcome(0.5, 0.02, 0.05, None).within(0.1) is None  # no true mount
+    assert RegistrationOutcome(0.59, 0.02, 0.05, 0.5).within(0.1)  # within 0.1 deg
+    assert not RegistrationOutcome(0.61, 0.02, 0.05, 0.5).within(0.1)
+    assert RegistrationOutcome(0.79, 0.1, 0.3, 0.5).within(0.1)  # within its wider bound
+    assert not RegistrationOutcome(0.81, 0.1, 0.3, 0.5).within(0.1)
+
+    def result(reg: RegistrationOutcome | None) -> Any:
+        return types.SimpleNamespace(profile="tracker", registration=reg)
+
+    lines = registration_lines([
+        result(RegistrationOutcome(0.55, 0.02, 0.05, 0.5)),
+        result(RegistrationOutcome(0.79, 0.1, 0.3, 0.5)),
+        result(RegistrationOutcome(0.81, 0.1, 0.3, 0.5)),
+        result(RegistrationOutcome(0.8, 0.1, 0.3, None)),  # not a world flight: not counted
+        result(None),
+    ])
+    assert lines == [
+        "tracker: azimuth within 0.1 deg of the true mount, or within the flight's bound, on 2 of "
+        "3 flights (1 within 0.1 deg); bound median 0.30 deg, 0.05-0.30"
+    ]

@@ -102,3 +102,53 @@ def test_a_surveyed_mount_is_not_refined_and_close_fixes_say_nothing() -> None:
     assert not _pair(reg, 1.0, rng, rho=MIN_RANGE_M - 5.0)
     assert reg.used == 0 and reg.az_deg == 0.0
     assert _pair(reg, 1.0, rng, rho=MIN_RANGE_M + 50.0)
+
+
+def _run_errors(errors_m: np.ndarray, stated_sd_m: float, az_deg: float = 0.5) -> Registration:
+    """Pairs 800 m out whose fixes are off across the beam by ``errors_m`` (one per pair),
+    each stated with ``stated_sd_m`` per axis."""
+    reg = Registration((0.0, 0.0, 10.0), RadarCalibration())
+    rho, b = 800.0, math.radians(45.0)
+    for err in errors_m:
+        fa = b + float(err) / rho  # the fix's azimuth, off by err across the beam
+        fix = (rho * math.sin(fa), rho * math.cos(fa))
+        o = b + math.radians(az_deg - reg.az_deg)
+        reg.pair((rho * math.sin(o), rho * math.cos(o)), fix, stated_sd_m**2, 1.0)
+    return reg
+
+
+def _ar1(rng: np.random.Generator, n: int, sd: float, r: float) -> np.ndarray:
+    out = np.empty(n)
+    out[0] = rng.normal(0.0, sd)
+    for k in range(1, n):
+        out[k] = r * out[k - 1] + rng.normal(0.0, sd * math.sqrt(1.0 - r * r))
+    return out
+
+
+def test_the_bound_is_the_sigma_for_independent_errors_and_wider_for_correlated_ones() -> None:
+    rng = np.random.default_rng(5)
+    # independent errors as stated: the bound is the estimate's own sigma, about
+    reg = _run_errors(rng.normal(0.0, 8.0, 400), 8.0)
+    ms, r = reg.residual_stats
+    assert 0.8 < ms < 1.2 and abs(r) < 0.15
+    assert reg.sigma_deg <= reg.bound_deg < 1.2 * reg.sigma_deg
+    # errors twice as large as stated: Huber's weight widens the sigma part of the way, the
+    # residuals' mean square the rest
+    reg = _run_errors(rng.normal(0.0, 8.0, 400), 4.0)
+    assert reg.residual_stats[0] > 1.3 and reg.bound_deg > 1.2 * reg.sigma_deg
+    # errors correlated from fix to fix (lag-one 0.8): (1 + 0.8) / (1 - 0.8) = 9 in variance
+    reg = _run_errors(_ar1(rng, 400, 8.0, 0.8), 8.0)
+    assert 0.7 < reg.residual_stats[1] < 0.9
+    assert 2.4 < reg.bound_deg / reg.sigma_deg < 3.6
+    assert reg.status()["registration_az_bound_deg"] == f"{reg.bound_deg:.3f}"
+
+
+def test_with_correlated_errors_the_bound_holds_the_truth_where_the_sigma_does_not() -> None:
+    rng = np.random.default_rng(6)
+    in_sigma = in_bound = 0
+    for _ in range(40):
+        reg = _run_errors(_ar1(rng, 200, 8.0, 0.9), 8.0)
+        err = abs(reg.az_deg - 0.5)
+        in_sigma += err <= 2.0 * reg.sigma_deg
+        in_bound += err <= 2.0 * reg.bound_deg
+    assert in_bound >= 34 and in_sigma <= 30  # 2 sigmas: 95 % if honest

@@ -306,6 +306,15 @@ def test_worlds_bench_and_sweep_end_to_end(
         ("tracker", "false_uav_clutter"), ("tracker", "narrow_fov"),
     ]  # fmt: skip
     assert all(float(r["longest_gross_s"]) >= 0 for r in rows)
+    # the tracker's registration against each world's true mount, and the flight's bound
+    trk = [r for r in rows if r["profile"] == "tracker"]
+    worlds = {r["family"]: read_world(next(cache.glob(f"*{r['family']}*"))) for r in trk}
+    for r in trk:
+        true = worlds[r["family"]]["radar_mount"]["az_bias_deg"]  # type: ignore[index]
+        assert float(r["registration_az_true_deg"]) == pytest.approx(true, abs=1e-3)
+        assert float(r["registration_az_bound_deg"]) >= float(r["registration_az_sigma_deg"])
+    assert all(r["registration_az_true_deg"] == "" for r in rows if r["profile"] == "paper")
+    assert "tracker: azimuth within 0.1 deg of the true mount, or within the flight's bound" in text
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["families"]) == {"narrow_fov", "false_uav_clutter", "all"}
     results = json.loads((tmp_path / "bench" / "results" / "tinyworlds-test.json").read_text())

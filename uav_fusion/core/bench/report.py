@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from uav_fusion.core.bench.single import FlightResult
+from uav_fusion.core.bench.single import FlightResult, RegistrationOutcome
 from uav_fusion.core.scoring.fixed_rate import (
     TABLE_COLUMNS,
     GridScore,
@@ -139,6 +139,7 @@ CSV_FIELDS = (
     "observable_after_start_pct", "anees",
     "nees_in95_pct", "ttf_s", "restarts", "gross_vertical_pct", "gross_age_p50_s",
     "gross_rf_pct", "longest_gross_s", "registration_az_deg", "registration_az_sigma_deg",
+    "registration_az_bound_deg", "registration_az_true_deg",
     "steps", "seconds",
 )
 
@@ -231,6 +232,32 @@ def text_families(
     return "\n".join([line(heads), "  ".join("-" * w for w in widths), *map(line, rows)])
 
 
+#: The registration criterion: within this of the true mount, or within the flight's bound.
+REGISTRATION_TOL_DEG = 0.1
+
+
+def registration_lines(results: Sequence[FlightResult]) -> list[str]:
+    """Per profile, over the flights with a true mount (generated in a world): on how many
+    the end-of-flight azimuth lies within REGISTRATION_TOL_DEG of it or within the bound of
+    the flight's data where that is larger, and the bounds' spread."""
+    out = []
+    by: dict[str, list[RegistrationOutcome]] = {}
+    for r in results:
+        if r.registration is not None and r.registration.true_deg is not None:
+            by.setdefault(r.profile, []).append(r.registration)
+    for prof, regs in by.items():
+        ok = sum(bool(g.within(REGISTRATION_TOL_DEG)) for g in regs)
+        tight = sum((g.error_deg or 0.0) <= REGISTRATION_TOL_DEG for g in regs)
+        bounds = sorted(g.bound_deg for g in regs)
+        out.append(
+            f"{prof}: azimuth within {REGISTRATION_TOL_DEG:g} deg of the true mount, or within "
+            f"the flight's bound, on {ok} of {len(regs)} flights ({tight} within "
+            f"{REGISTRATION_TOL_DEG:g} deg); bound median {bounds[len(bounds) // 2]:.2f} deg, "
+            f"{bounds[0]:.2f}-{bounds[-1]:.2f}"
+        )
+    return out
+
+
 def per_flight_scores(
     results: Sequence[FlightResult], settings: ScoreSettings
 ) -> list[tuple[FlightResult, GridScore]]:
@@ -249,9 +276,13 @@ def write_csv(
                 "family": r.family or "", "split": r.split, "steps": r.steps,
                 "seconds": f"{r.seconds:.3f}",
             }
-            if r.registration is not None:
-                d["registration_az_deg"] = f"{r.registration[0]:.3f}"
-                d["registration_az_sigma_deg"] = f"{r.registration[1]:.3f}"
+            reg = r.registration
+            if reg is not None:
+                d["registration_az_deg"] = f"{reg.az_deg:.3f}"
+                d["registration_az_sigma_deg"] = f"{reg.sigma_deg:.3f}"
+                d["registration_az_bound_deg"] = f"{reg.bound_deg:.3f}"
+                if reg.true_deg is not None:
+                    d["registration_az_true_deg"] = f"{reg.true_deg:.3f}"
             for k, v in s.as_dict().items():
                 if k in CSV_FIELDS and k not in d:
                     d[k] = "" if isinstance(v, float) and not math.isfinite(v) else (

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 from uav_fusion.core.bench.cache import CachedFlight, generate_flight, read_labels
 from uav_fusion.core.bench.definition import BenchDefinition
@@ -23,6 +24,7 @@ from uav_fusion.core.scoring.fixed_rate import (
     score_grid,
 )
 from uav_fusion.core.site import Site
+from uav_fusion.core.twin.worlds import read_world
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,28 @@ class ScoreTask:
 
 
 @dataclass(frozen=True)
+class RegistrationOutcome:
+    """The azimuth registration at the end of a run, degrees: the estimate, its sigma, the
+    bound of the flight's data (``registration.Registration.bound_deg``) and, for a flight
+    generated in a world, the radar's true mount misalignment."""
+
+    az_deg: float
+    sigma_deg: float
+    bound_deg: float
+    true_deg: float | None = None
+
+    @property
+    def error_deg(self) -> float | None:
+        return None if self.true_deg is None else abs(self.az_deg - self.true_deg)
+
+    def within(self, tol_deg: float) -> bool | None:
+        """Within ``tol_deg`` of the true mount, or within the bound where that is larger
+        (None without a true mount)."""
+        err = self.error_deg
+        return None if err is None else err <= max(tol_deg, self.bound_deg)
+
+
+@dataclass(frozen=True)
 class FlightResult:
     """The outcome of one (flight, profile) task."""
 
@@ -54,8 +78,8 @@ class FlightResult:
     steps: int
     seconds: float
     family: str | None = None  # the world family of the flight (None: the twin's own world)
-    #: the radar registration at the end of the run (azimuth, its sigma; degrees), if any
-    registration: tuple[float, float] | None = None
+    #: the radar registration at the end of the run, if any
+    registration: RegistrationOutcome | None = None
 
 
 def generate_task(task: GenerateTask) -> bool:
@@ -85,13 +109,25 @@ def score_task(task: ScoreTask) -> FlightResult:
         steps=len(result.steps),
         seconds=time.perf_counter() - t0,
         family=cf.flight.family,
-        registration=registration(result.status),
+        registration=registration(result.status, true_mount_az(cf.folder)),
     )
 
 
-def registration(status: dict[str, object]) -> tuple[float, float] | None:
-    """The azimuth registration (estimate, sigma; degrees) of an estimator's status."""
+def registration(
+    status: dict[str, object], true_deg: float | None = None
+) -> RegistrationOutcome | None:
+    """The azimuth registration of an estimator's status (None without one)."""
     az, sd = status.get("registration_az_deg"), status.get("registration_az_sigma_deg")
     if az is None or sd is None:
         return None
-    return float(str(az)), float(str(sd))
+    bound = status.get("registration_az_bound_deg", sd)
+    return RegistrationOutcome(float(str(az)), float(str(sd)), float(str(bound)), true_deg)
+
+
+def true_mount_az(folder: Path) -> float | None:
+    """The radar's true azimuth misalignment of a flight generated in a world (its
+    ``world.yaml``), else None."""
+    doc = read_world(folder)
+    if doc is None:
+        return None
+    return float(doc["radar_mount"]["az_bias_deg"])
