@@ -417,18 +417,24 @@ def radar_gates2(profile: Profile, site: Site) -> tuple[float, float]:
 
 
 def object_start(obj: RadarObject, profile: Profile, flat: bool) -> tuple[list[float], FloatArray]:
-    """A new track's state and covariance from a radar object's own filter; ``flat`` (the
-    object reported beyond the 3D range gate): no usable height, so the RF start's height
-    prior (``rf_init_altitude_m`` +- ``rf_init_altitude_std_m``) and no climb instead."""
+    """A new track's state and covariance from a radar object's own filter, level: its climb
+    rate 0 +- ``vz_hold_sigma_mps``. The object's own climb rate comes from a few seconds of
+    reports whose heights scatter by tens of metres, and the track's stiff vertical would keep
+    a wrong one for a minute (a track born in a take-off climb overshoots the level-off by
+    70 m); a UAV mostly holds its height, and a steady climb is learnt from the heights.
+    ``flat`` (the object reported beyond the 3D range gate): no usable height either, so the
+    RF start's height prior (``rf_init_altitude_m`` +- ``rf_init_altitude_std_m``)."""
     kf = obj.kf
     assert kf is not None
     x = list(kf.x)
     P = expand_upper(kf.P)
+    x[5] = 0.0
+    P[5, :] = P[:, 5] = 0.0
+    P[5, 5] = profile.vz_hold_sigma_mps**2
     if flat:
-        x[2], x[5] = profile.rf_init_altitude_m, 0.0
-        P[2, :] = P[:, 2] = P[5, :] = P[:, 5] = 0.0
+        x[2] = profile.rf_init_altitude_m
+        P[2, :] = P[:, 2] = 0.0
         P[2, 2] = profile.rf_init_altitude_std_m**2
-        P[5, 5] = profile.vz_hold_sigma_mps**2
     return x, P
 
 

@@ -234,7 +234,8 @@ _UPDATE = _group(
        "long, each RF fix first applies vz = 0 (2D fixes cannot see the climb rate)", unit="s",
        bounds=">= 0", null="never"),
     _k("vz_hold_sigma_mps", "vz_hold_sigma_mps", NUMBER, DESIGN, "standard deviation of that "
-       "pseudo-measurement", unit="m/s", bounds="> 0"),
+       "pseudo-measurement, and of the climb rate a track starts with (0: tracks start level)",
+       unit="m/s", bounds="> 0"),
     _k("notch_after_s", "notch_after_s", NUMBER, DESIGN, "single-UAV tracker: without a radar "
        "update for this long within notch_range_m, each radar frame applies radial speed = 0 "
        "(a hover in the Doppler notch)", unit="s", bounds=">= 0", null="never"),
