@@ -16,8 +16,8 @@ from uav_fusion.core.bench.sweep import (
     load_spec,
     run_sweep_task,
     sweep_tasks,
-    write_figure,
 )
+from uav_fusion.core.bench.sweep_figure import write_figure
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path

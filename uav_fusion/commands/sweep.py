@@ -24,9 +24,9 @@ from uav_fusion.core.bench.sweep import (
     run_sweep_task,
     summary_rows,
     sweep_tasks,
-    write_figure,
     write_table,
 )
+from uav_fusion.core.bench.sweep_figure import write_figure
 from uav_fusion.core.bench.tradeoff import tradeoff_rows, write_tradeoff_figure
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.site import load_site
