@@ -598,15 +598,6 @@ def test_beyond_the_range_gate_tracks_are_updated_and_born_horizontally(site: Si
     assert sum(1 for ep in near if ep.tracks and high(ep.t - 1000.0)) < 10
 
 
-def test_the_class_read_for_age_is_the_single_uav_trackers_unless_turned_off(site: Site) -> None:
-    p = load_profile("tracker")
-    assert p.score.class_prior_logit == -1.0
-    on = MultiTracker(p, site)
-    assert on.cfg.class_prior_logit == -1.0 and on.objects.cfg.class_prior_logit == -1.0
-    off = MultiTracker(p, site, MultiSettings(class_by_age=False))
-    assert off.cfg.class_prior_logit is None and off.objects.cfg.class_prior_logit is None
-
-
 def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site: Site) -> None:
     """A silent UAV seen from its take-off gets its track after 4 s of radar reports (it
     moves: `early_birth_age_s`, `early_birth_speed_mps`), not after the 8 s the stationary
@@ -667,7 +658,7 @@ def test_the_profiles_multi_section_sets_the_tracker(site: Site, tmp_path: Path)
         ({"emitter_doubt": 1.5}, r"multi.emitter_doubt must be a number in \[0, 1\]"),
         ({"emitter_misses": 0}, "multi.emitter_misses must be an integer >= 1 or null"),
         ({"emitter_misses": 2.5}, "multi.emitter_misses must be an integer"),
-        ({"class_by_age": "yes"}, "multi.class_by_age must be true or false, got 'yes'"),
+        ({"merge_keeps_live": "yes"}, "multi.merge_keeps_live must be true or false, got 'yes'"),
         ({"velocity_sigma_mps": None}, "multi.velocity_sigma_mps must be a number > 0, got None"),
         ({"output_coast_s": float("nan")}, "multi.output_coast_s must be a number >= 0 or null"),
         ({"birth_gap_s": 3.0}, "unknown key 'multi.birth_gap_s'"),
@@ -687,7 +678,7 @@ def test_a_bad_multi_key_stops_naming_the_file_and_key(
 
 def test_a_profile_round_trips_its_multi_section() -> None:
     p = load_profile("tracker")
-    changed = dataclasses.replace(p.multi, merge_s=5.0, emitter_misses=None, class_by_age=False)
+    changed = dataclasses.replace(p.multi, merge_s=5.0, emitter_misses=None, merge_keeps_live=False)
     doc = dataclasses.replace(p, multi=changed).as_dict()
     assert profile_from_dict(doc).multi == changed
     assert "multi" not in load_profile("paper").as_dict()  # the paper's profile as it was
@@ -719,45 +710,3 @@ def test_an_emitting_uav_is_followed_where_its_fixes_put_a_radar_track_still_cla
             assert epochs[-1].tracks[0].emitter == emitter_key(FREQ_A)
         assert first[seed, 0.0] <= 34.0 and first[seed, None] - first[seed, 0.0] >= 3.0  # 33, 37
     assert MultiSettings().emitter_follow_min == 0.0
-
-
-def test_a_far_young_radar_track_has_its_class_read_for_its_range(site: Site) -> None:
-    """A silent UAV first seen 1.5 km out, crossing the line of sight, its radar track's class
-    output built up as a classifier does (logit from the prior -1 towards 2.8, at a rate that
-    grows with the track's age and falls with its range): read for its range as well as its
-    age (``class_range_scale_m``) its track starts 4 s after the first report, the earliest a
-    moving object may (``early_birth_age_s``), instead of 6 s."""
-    az = math.radians(site.radar.boresight_az_deg)
-    start = np.array([1500.0 * math.sin(az), 1500.0 * math.cos(az), 60.0])
-    vel = np.array([8.0 * math.cos(az), -8.0 * math.sin(az), 0.0])  # across the line of sight
-
-    def path(tau: float) -> np.ndarray:
-        return start + vel * tau
-
-    def classifier(item: RadarFrame | RfAttempt) -> RadarFrame | RfAttempt:
-        if not isinstance(item, RadarFrame):
-            return item
-        reps = []
-        for r in item.tracks:
-            assert r.range_m is not None
-            age = item.t - 1010.0
-            logit = -1.0 + (1.0 - math.exp(-age / 5.0)) * math.exp(-r.range_m / 3000.0) * 3.8
-            reps.append(dataclasses.replace(r, uav_prob=1.0 / (1.0 + math.exp(-logit))))
-        return dataclasses.replace(item, tracks=tuple(reps))
-
-    # the scene is timed for a 3 s class history (the rule under test does not depend on it)
-    prof = load_profile("tracker").with_keys({"association.class.tau_s": 3.0})
-    for seed in (1, 2):
-        stream = scene_stream(site, [Uav(path, 10, seen=lambda tau: tau >= 10.0)], 60.0, seed)
-        stream = [classifier(item) for item in stream]
-        first = {}
-        for scale in (3000.0, None):
-            settings = MultiSettings(class_range_scale_m=scale)
-            epochs = run_multi(
-                MultiTracker(prof, site, settings), stream, 1.0, 1000.0, 1059.0
-            )
-            on_uav = [ep.t - 1000.0 for ep in epochs if _near(site, ep, path)]
-            first[scale] = on_uav[0]
-            assert len(on_uav) == 60 - on_uav[0] and all(len(ep.tracks) <= 1 for ep in epochs)
-        assert first[3000.0] <= 14.0 and first[None] >= 16.0
-    assert MultiSettings().class_range_scale_m == 3000.0

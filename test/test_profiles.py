@@ -38,6 +38,14 @@ MOVED = {
     "rf_ref_sensors": "gone: the number of sensors does not enter the RF R",
     "rf_sensor_exponent": "gone: it was fitted to 0",
     "score.ground_release_sigmas": "gone: the rule changed no tune flight of either benchmark",
+    "score.class_prior_logit": "gone: a model of one classifier's output on young tracks",
+    "score.class_age_tau_s": "gone with it",
+    "score.class_min_weight": "gone with it",
+    "score.class_range_scale_m": "gone with it",
+    "score.class_range_age_s": "gone with it",
+    "multi.class_by_age": "gone with it",
+    "multi.class_range_scale_m": "gone with it",
+    "multi.class_range_age_s": "gone with it",
 }
 # Values refitted since (the tracker's, on the tune halves of the accuracy and worlds
 # benchmarks; docs/estimator.md says with what).
@@ -133,8 +141,7 @@ def test_every_field_has_exactly_one_key() -> None:
     assert len(attrs) == len(set(attrs))
     assert len({k.path for k in KEYS}) == len(KEYS)
     want = {f.name for f in dataclasses.fields(Profile)} - {"source", "score", "multi"}
-    want |= {f"score.{f.name}" for f in dataclasses.fields(ScoreConfig)} - {
-        "score.class_range_scale_m", "score.class_range_age_s"}  # set by MultiSettings
+    want |= {f"score.{f.name}" for f in dataclasses.fields(ScoreConfig)}
     want |= {f"multi.{f.name}" for f in dataclasses.fields(MultiSettings)}
     assert set(attrs) == want
 
@@ -280,7 +287,7 @@ def test_with_keys_sets_keys_by_path_and_checks_them() -> None:
     q = p.with_keys({"association.class.tau_s": 7.0, "multi.merge_s": 2.0, "motion.q": (1.0,) * 3})
     assert (q.score.class_tau_s, q.multi.merge_s, q.q) == (7.0, 2.0, (1.0, 1.0, 1.0))
     assert q.score.follow_min == p.score.follow_min and p.score.class_tau_s == 5.0
-    with pytest.raises(ConfigError, match=r"association\.class\.min_weight must be a number in"):
-        p.with_keys({"association.class.min_weight": 0.0})
+    with pytest.raises(ConfigError, match=r"association\.class\.tau_s must be a number >= 0"):
+        p.with_keys({"association.class.tau_s": -1.0})
     with pytest.raises(ConfigError, match=r"unknown key 'association\.class_tau_s'"):
         p.with_keys({"association.class_tau_s": 5.0})

@@ -120,22 +120,6 @@ def _imm(**changes: Any) -> dict[str, Any]:
             lambda d: d["association"]["takeover"].update(reach_margin_m=-5.0),
             r"association\.takeover\.reach_margin_m must be a number >= 0",
         ),
-        (
-            lambda d: d["association"]["class"].update(min_weight=0.0),
-            r"association\.class\.min_weight must be a number in \(0, 1\]",
-        ),
-        (
-            lambda d: d["association"]["class"].update(age_tau_s=0.0),
-            r"association\.class\.age_tau_s must be a number > 0",
-        ),
-        (
-            lambda d: d["association"]["class"].update(prior_logit=float("inf")),
-            r"association\.class\.prior_logit must be a number or null, got inf",
-        ),
-        (
-            lambda d: d["association"]["class"].update(prior_logit="low"),
-            r"association\.class\.prior_logit",
-        ),
     ],
 )
 def test_tracker_profile_errors_name_file_and_key(
@@ -519,13 +503,8 @@ def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
 
 
 def _rule_alone() -> Profile:
-    """The tracker without the radial-speed pseudo-measurement (which narrows the gate) and
-    without the young-track reading of the class (this scene's radar gives a new track its
-    class from the first report on, with no classifier prior to leave)."""
-    p = load_profile("tracker")
-    return dataclasses.replace(
-        p, notch_after_s=None, score=dataclasses.replace(p.score, class_prior_logit=None)
-    )
+    """The tracker without the radial-speed pseudo-measurement (which narrows the gate)."""
+    return dataclasses.replace(load_profile("tracker"), notch_after_s=None)
 
 
 def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site: Site) -> None:
@@ -1093,63 +1072,20 @@ def _classifier(target_logit: float) -> Callable[[float], float]:
     return prob
 
 
-def test_a_young_uav_track_is_taken_sooner_when_its_class_is_read_for_its_age(
-    site: Site,
-) -> None:
-    """The UAV's radar track and a slow bird-like object's both start at the classifier's prior;
-    read for their age (association.class.prior_logit) the UAV's class shows about 2 s
-    sooner, and the other object is never taken either way."""
-    decoy_id = 444
-    not_uav = _classifier(-0.5)  # a rotor-like non-UAV: never above 0.5
-
-    def decoy(sc: Scene, t: float, k: int) -> RadarTrack | None:
-        p = sc.uav(0.0) + np.array([-250.0, 120.0, 10.0]) + np.array([3.0, 0.0, 0.0]) * t
-        return sc.report(t, decoy_id, p, not_uav(t), np.array([3.0, 0.0, 0.0]), rcs_dbsm=-22.0)
-
-    firsts = {}
-    for reading in (True, False):
-        sc = Scene(site, seed=12)
-        sc.build(60.0, uav_prob=_classifier(2.8), rf_ok=lambda t: False, decoy=decoy)
-        p = load_profile("tracker")
-        assert p.score.class_prior_logit == -1.0
-        if not reading:
-            p = dataclasses.replace(p, score=dataclasses.replace(p.score, class_prior_logit=None))
-        steps = run_tracker(Tracker(p, site), sc.stream())
-        assert not any(s.track_id == decoy_id and (s.updated or s.coasted) for s in steps)
-        first = [s for s in steps if s.status == "initialised"]
-        assert first and first[0].track_id == 10
-        firsts[reading] = first[0].t
-    assert firsts[True] <= firsts[False] - 1.5  # 3.25 s against 5.25 s
-
-
-def test_a_reports_class_is_read_for_its_radar_tracks_age() -> None:
-    """logit -> prior + (logit - prior) / max(min_weight, 1 - exp(-age / tau)), and the class
-    history starts at the prior (hand values)."""
-    cfg = dataclasses.replace(
-        ScoreConfig(), class_prior_logit=-1.0, class_age_tau_s=4.0, class_min_weight=0.4,
-        class_tau_s=3.0,
-    )  # fmt: skip
+def test_the_class_history_is_an_average_of_the_reports_logits() -> None:
+    """The first report's logit starts the history; later ones are averaged with the time
+    constant class_tau_s; each logit is clipped to +-class_clip (hand values)."""
+    cfg = dataclasses.replace(ScoreConfig(), class_tau_s=3.0, class_clip=3.0)
     table = ObjectTable(cfg, FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
 
     def rep(t: float, p: float) -> RadarTrack:
         return RadarTrack(t, 7, 0.0, 0.0, 0.0, 100.0, 200.0, 50.0, (0.0, 1.0, 0.0), p, None, -10.0)
 
-    obj = table.update(rep(10.0, 0.5))  # age 0: weight 0.4; the history starts at the prior
-    assert obj.class_logit == -1.0
-    obj = table.update(rep(11.0, 0.5))  # age 1: 1 - exp(-1/4) = 0.221 < 0.4: logit 0 -> 1.5
+    assert table.update(rep(10.0, 0.5)).class_logit == 0.0
+    obj = table.update(rep(11.0, 0.8))
     a = math.exp(-1.0 / 3.0)
-    assert obj.class_logit == pytest.approx(-1.0 * a + 1.5 * (1.0 - a), abs=1e-12)
+    assert obj.class_logit == pytest.approx((1.0 - a) * math.log(4.0), abs=1e-12)
     prev = obj.class_logit
-    obj = table.update(rep(18.0, 0.5))  # age 8: weight 1 - exp(-2) = 0.8647
-    w = 1.0 - math.exp(-2.0)
-    a = math.exp(-7.0 / 3.0)
-    assert obj.class_logit == pytest.approx(prev * a + (-1.0 + 1.0 / w) * (1.0 - a), abs=1e-12)
-    # a report far beyond the clip is clipped after the reading
-    obj = table.update(rep(18.5, 0.99))
-    assert obj.class_logit <= cfg.class_clip
-    # off: the first report's logit is the history, taken as it is
-    plain = ObjectTable(
-        dataclasses.replace(cfg, class_prior_logit=None),
-        FixedRadarR((1.0, 0.0, 0.0, 1.0, 0.0, 1.0)),
-    )
-    assert plain.update(rep(10.0, 0.5)).class_logit == 0.0
+    obj = table.update(rep(13.0, 0.9999))  # logit 9.2, clipped to 3
+    a = math.exp(-2.0 / 3.0)
+    assert obj.class_logit == pytest.approx(prev * a + 3.0 * (1.0 - a), abs=1e-12)

@@ -4,10 +4,8 @@ It composes the parts it shares with the single-UAV tracker
 (:mod:`~uav_fusion.core.estimators.parts`: the radar front-end with the radar object table and
 its UAV score, the measurement models, the robust weight, the NIS gates, the deleter and M-of-N
 confirmation) and routes RF fixes by emitter (:mod:`~uav_fusion.core.estimators.emitters`).
-The score reads a young radar track's class for its age, and, while the radar track is young,
-for its range too (``class_range_scale_m``, ``class_range_age_s``). Its own settings are the
-profile's ``multi`` section (``config/profiles/README.md``); a ``settings`` argument given to
-:class:`MultiTracker` replaces them.
+Its own settings are the profile's ``multi`` section (``config/profiles/README.md``); a
+``settings`` argument given to :class:`MultiTracker` replaces them.
 
 Per radar frame (one time for all reports):
 
@@ -52,7 +50,6 @@ A track's UAV probability is the logistic of the UAV score of the radar object i
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
@@ -152,15 +149,6 @@ class MultiTracker:
         self.site = site
         self.settings = settings or profile.multi
         self.cfg = profile.score
-        st = self.settings
-        if not st.class_by_age and self.cfg.class_prior_logit is not None:
-            self.cfg = replace(self.cfg, class_prior_logit=None)
-        elif st.class_range_scale_m is not None:
-            self.cfg = replace(
-                self.cfg,
-                class_range_scale_m=st.class_range_scale_m,
-                class_range_age_s=st.class_range_age_s,
-            )
         self.front = RadarFront(profile, site, self.cfg)
         self.objects = self.front.objects
         self.radar_r = self.front.radar_r

@@ -6,17 +6,9 @@ tracking is an extension, not a rewrite) and a *UAV score* per object, a sum of 
 terms from independent cues (no single cue decides; the radar's classifier errs both ways):
 
 * class history: exponential moving average (time constant ``class_tau_s``) of the logit of
-  the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``. With
-  ``class_prior_logit`` set, each report's logit is first read for the radar track's age: a
-  radar classifier has few features on a young track, so its output starts at a prior and
-  moves towards the object's class as features accumulate. A report at age ``a`` (since the
-  object's first report) counts as ``prior + (logit - prior) / w`` with ``w = max(
-  class_min_weight, 1 - exp(-a / class_age_tau_s))`` (the UAV's young track at class
-  probability 0.4 says more than an old one at 0.4), and the history starts at the prior
-  instead of at the first report; with ``class_range_scale_m`` (set by the multi-UAV
-  tracker, not a profile key) ``w`` is also multiplied by ``exp(-range / class_range_scale_m)``
-  while the object is younger than ``class_range_age_s`` (the report's own ``range``; a far
-  track's classifier has fewer features, so its output leaves the prior more slowly);
+  the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``, each
+  report's output taken as it is (a model of how a particular classifier's output on a young
+  track evolves would be that classifier's constants, not the tracker's);
 * kinematics: an object whose mean height (moving average of its reports' ENU up) lies
   below the ground by more than ``below_ground_m``, and by more than ``below_ground_sigmas``
   times the mean vertical standard deviation of its reports (from the radar's polar R: a few
@@ -319,8 +311,7 @@ class ObjectTable:
         self, obj: RadarObject, trk: RadarTrack, p: float, dt: float, first: bool
     ) -> None:
         """Fold a report's UAV class probability ``p`` (finite) into the object's class
-        history (``dt`` since its previous report; ``first``: its first report), read for
-        the track's age and range when the profile sets a class prior (module text)."""
+        history (``dt`` since its previous report; ``first``: its first report)."""
         cfg = self.cfg
         # min(max(p, 1e-6), 1 - 1e-6) and max(-c, min(c, logit)) as conditionals
         c = cfg.class_clip
@@ -328,30 +319,12 @@ class ObjectTable:
         if pc > 1.0 - 1e-6:
             pc = 1.0 - 1e-6
         lg = math.log(pc / (1.0 - pc))
-        prior = cfg.class_prior_logit
-        if prior is not None:
-            # the report's distance from the prior, for the track's age
-            age = trk.t - obj.first_t
-            w = 1.0 - math.exp(-age / cfg.class_age_tau_s)
-            rng_m = trk.range_m
-            if (
-                age < cfg.class_range_age_s
-                and cfg.class_range_scale_m > 0.0
-                and rng_m is not None
-                and math.isfinite(rng_m)
-            ):
-                # a far track's classifier has fewer features to go on: its output leaves
-                # the prior more slowly
-                w *= math.exp(-rng_m / cfg.class_range_scale_m)
-            if w < cfg.class_min_weight:
-                w = cfg.class_min_weight
-            lg = prior + (lg - prior) / w
         if c < lg:
             lg = c
         if -c > lg:
             lg = -c
-        if first:  # with a prior (and a history) the history starts there
-            obj.class_logit = lg if prior is None or cfg.class_tau_s <= 0 else prior
+        if first:
+            obj.class_logit = lg
         else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
             tau = cfg.class_tau_s
             if tau <= 0:

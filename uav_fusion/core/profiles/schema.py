@@ -252,13 +252,6 @@ _ASSOCIATION = (
            bounds=">= 0", fit=TUNED),
         _s("clip", "class_clip", NUMBER, DESIGN, "each logit is clipped to +-clip",
            bounds=">= 0"),
-        _s("prior_logit", "class_prior_logit", NUMBER, FITTED, "a young radar track's class "
-           "output starts at this prior: a report at age a counts as prior + (logit - prior) / "
-           "max(min_weight, 1 - exp(-a / age_tau_s))", null="every logit as it is", fit=TUNED),
-        _s("age_tau_s", "class_age_tau_s", NUMBER, FITTED, "how fast the classifier's output "
-           "leaves its prior", unit="s", bounds="> 0", fit=TUNED),
-        _s("min_weight", "class_min_weight", NUMBER, FITTED, "smallest weight of a young "
-           "report's class", bounds="(0, 1]", fit=TUNED),
     ),
     *_group("association.stationary", TRACKER,
         _s("speed_mps", "stationary_speed_mps", NUMBER, PHYSICAL, "an object whose mean speed "
@@ -384,12 +377,6 @@ _MULTI = _group(
        bounds=">= 0", null="never"),
     _m("flat_below_ground", BOOL, DESIGN, "a report below association.ghost.below_ground_m "
        "updates east and north only"),
-    _m("class_by_age", BOOL, DESIGN, "read a young radar track's class for its age "
-       "(association.class.prior_logit)"),
-    _m("class_range_scale_m", NUMBER, DESIGN, "with class_by_age, a young track's class weight "
-       "is also multiplied by exp(-range / this)", unit="m", bounds="> 0", null="off"),
-    _m("class_range_age_s", NUMBER, DESIGN, "... while the track is younger than this",
-       unit="s", bounds=">= 0"),
     _m("output_coast_s", NUMBER, FITTED, "a confirmed track is published while its last "
        "update is this recent", unit="s", bounds=">= 0", null="while it lives", fit=TUNED),
     _m("radar_output_s", NUMBER, DESIGN, "... and, inside radar cover, its last radar update",

@@ -36,10 +36,6 @@ class MultiSettings:
     early_birth_age_s: float | None = 4.0  # an object moving at early_birth_speed_mps or
     early_birth_speed_mps: float = 3.0  # more (mean speed) may start a track from this age
     # (None: only from birth_age_s, or with RF support)
-    class_by_age: bool = True  # the profile's class_prior_logit reading of young radar
-    # tracks (False: each report's class as it is)
-    class_range_scale_m: float | None = 3000.0  # with class_by_age, a radar track younger
-    class_range_age_s: float = 8.0  # than this has its class read for its range too (None: off)
     emitter_follow_min: float | None = 0.0  # an object scoring this much (below follow_min)
     # that its emitter's fixes credit may update the track carrying that emitter (None: off)
 
@@ -89,13 +85,3 @@ class ScoreConfig:
     rf_nearest_only: bool = False
     challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
     challenge_margin: float = 0.5
-    # a young radar track's class output leans to the classifier's prior (module text); None:
-    # every report's logit taken as it is
-    class_prior_logit: float | None = None
-    class_age_tau_s: float = 4.0
-    class_min_weight: float = 0.4
-    # ... and, while the object is younger than class_range_age_s, for its range: the weight is
-    # also multiplied by exp(-range / class_range_scale_m) (0: off). Not profile keys: the
-    # multi-UAV tracker sets them (MultiSettings); module text
-    class_range_scale_m: float = 0.0
-    class_range_age_s: float = 0.0
