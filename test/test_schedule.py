@@ -154,3 +154,18 @@ def test_a_clock_row_publishes_epochs_before_a_late_input(items, tmp_path: Path)
     back = read_schedule(write_schedule(tmp_path / "a.csv", rows), items)
     assert [type(x).__name__ for _, x in back] == [type(x).__name__ for _, x in live]
     assert back[len(before) + len(late)] == (CLOCK, tick)
+
+
+def test_the_sensor_clock_runs_ahead_by_the_quickest_inputs_lead() -> None:
+    from uav_fusion.core.live.sensor_clock import SensorClock
+
+    clock = SensorClock(window=3)
+    assert not clock.known and clock.at(100.0) == 100.0  # nothing seen: the node's clock
+    # sensors 50 s ahead of the host; inputs 0.4, 0.1 and 2.0 s late
+    for stamp, node in ((1050.0, 1000.4), (1051.0, 1001.1), (1052.0, 1004.0)):
+        clock.observe(stamp, node)
+    assert clock.known
+    assert clock.at(1010.0) == pytest.approx(1010.0 + 49.9)  # the quickest input's lead
+    clock.observe(1060.0, 1013.0)  # two more: the 0.4 s and 0.1 s inputs leave the window
+    clock.observe(1061.0, 1013.5)
+    assert clock.at(1020.0) == pytest.approx(1020.0 + 48.0)  # the 2.0 s input's lead now

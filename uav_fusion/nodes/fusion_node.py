@@ -16,11 +16,10 @@ wall time without input, predicts the fixed-rate output up to the current time w
 inputs stall for ``stall_timeout_s`` (at most ``max_coast_s`` past the last processed time)
 and publishes the views every ``view_period_s``; diagnostics every ``diagnostics_period_s``.
 With ``output_delay_s`` >= 0 a 10 ms timer publishes every fixed-rate epoch once the sensor
-time is that far past it. The sensor time, for both, is the node's clock (simulated, else
-wall) plus the largest (stamp - node clock) of the last 64 inputs fused: the sensor clock
-less the quickest input's delay, whatever the offset between the sensors' clocks and the
-host's. Each such move of the output is a ``clock`` row of the arrival schedule. The
-``fusion/flush`` service (std_srvs/Trigger) flushes the buffer, as does shutdown.
+time is that far past it. The sensor time, for both, comes from the node's clock and the
+stamps of the recent inputs (:mod:`~uav_fusion.core.live.sensor_clock`). Each such move of
+the output is a ``clock`` row of the arrival schedule. The ``fusion/flush`` service
+(std_srvs/Trigger) flushes the buffer, as does shutdown.
 """
 
 from __future__ import annotations
@@ -42,6 +41,7 @@ from uav_fusion.core.estimators import ESTIMATORS, Estimator, load_profile, make
 from uav_fusion.core.estimators.grid import Outputs
 from uav_fusion.core.live.pipeline import Pipeline, PipelineConfig
 from uav_fusion.core.live.schedule import CLOCK
+from uav_fusion.core.live.sensor_clock import SensorClock
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.site import load_site
 from uav_fusion.ros.app import run_node
@@ -242,10 +242,8 @@ class FusionNode(Node):
         self._sim = bool(self.get_parameter("use_sim_time").value)
         self._idle_s = float(p["idle_flush_s"])
         self._stall_s = float(p["stall_timeout_s"])
-        # output_delay_s: stamp minus node-clock time of the recent inputs; the largest says
-        # how far the sensor time is ahead of the node's clock, less the quickest link's delay
         self._out_delay = float(p["output_delay_s"])
-        self._ahead: deque[float] = deque(maxlen=64)
+        self._sensor_clock = SensorClock()
         self._view_period = float(p["view_period_s"])
         self.add_post_set_parameters_callback(self._after_params)
         self._ros_clock = self.get_clock()
@@ -373,7 +371,7 @@ class FusionNode(Node):
             out = pipe.rf(attempts, clock)
             t = max((a.t for a in attempts), default=math.inf)
         if t <= pipe.processed_t:  # fused (not held, not dropped as ahead of time)
-            self._ahead.append(t - now)
+            self._sensor_clock.observe(t, now)
         return out
 
     # --- time passing ---------------------------------------------------------------------
@@ -403,20 +401,15 @@ class FusionNode(Node):
             n = self.flush()
             self.get_logger().info(f"no input for {self._idle_s:g} s: flushed {n} measurement(s)")
         if self._stall_s > 0 and quiet_s >= self._stall_s:
-            self._move_output(self._sensor_now(now))
+            self._move_output(self._sensor_clock.at(now))
         if time.monotonic() - self.output.last_view >= self._view_period:
             self.output.publish_views()
 
-    def _sensor_now(self, now: float) -> float:
-        """The sensor time at node-clock time ``now``: ``now`` plus the largest (stamp - node
-        clock) of the recent inputs (the sensor clock less the quickest input's delay)."""
-        return now + max(self._ahead) if self._ahead else now
-
     def _on_clock(self) -> None:
         """output_delay_s: the fixed-rate output up to the sensor time now, less the delay."""
-        if self._ahead:
+        if self._sensor_clock.known:
             now, _ = self._now()
-            self._move_output(self._sensor_now(now) - self._out_delay)
+            self._move_output(self._sensor_clock.at(now) - self._out_delay)
 
     def _move_output(self, t: float) -> None:
         """The fixed-rate output moved on to ``t`` without input; the arrival schedule
