@@ -81,23 +81,30 @@ def test_radar_sigmas_converge_to_the_streams_own() -> None:
     assert ad.status()["radar_noise_samples"] == len(t) - 1
 
 
+def _adapted(
+    spec: tuple[float, float], truth: tuple[float, float], n: int, seed: int
+) -> AdaptiveRadarR:
+    """The adaptive radar R (window 300, bound 2) after ``n`` reports: specified and true
+    (range m, angle deg) sigmas, the angle sigma for azimuth and elevation alike."""
+    rad = math.radians
+    ad = AdaptiveRadarR(PolarRadarR(RADAR, spec[0], rad(spec[1]), rad(spec[1])), window=300,
+                        bound=2.0, gate_m=1000.0)
+    t, z = _polar_reports(n, truth[0], rad(truth[1]), rad(truth[1]), seed=seed)
+    _run_radar(ad, t, z)
+    return ad
+
+
 def test_radar_sigmas_never_fall_below_the_specification() -> None:
     """A radar four times better than specified: innovations that small are what errors
     correlated over time look like, so each estimate stays at its spec."""
-    spec = PolarRadarR(RADAR, 8.0, math.radians(2.0), math.radians(2.0))
-    ad = AdaptiveRadarR(spec, window=300, bound=2.0, gate_m=1000.0)
-    t, z = _polar_reports(2000, 2.0, math.radians(0.5), math.radians(0.5), seed=5)
-    _run_radar(ad, t, z)
+    ad = _adapted((8.0, 2.0), (2.0, 0.5), 2000, seed=5)
     assert ad.range.sigma == 8.0
     assert ad.az.sigma == pytest.approx(math.radians(2.0))
     assert ad.range.held and ad.az.held and ad.el.held
 
 
 def test_radar_sigma_above_its_bound_is_held_there() -> None:
-    spec = PolarRadarR(RADAR, 1.0, math.radians(0.2), math.radians(0.2))
-    ad = AdaptiveRadarR(spec, window=300, bound=2.0, gate_m=1000.0)
-    t, z = _polar_reports(1500, 5.0, math.radians(1.0), math.radians(1.0), seed=7)
-    _run_radar(ad, t, z)
+    ad = _adapted((1.0, 0.2), (5.0, 1.0), 1500, seed=7)
     assert ad.range.sigma == 2.0
     assert ad.az.sigma == pytest.approx(math.radians(0.4))
 

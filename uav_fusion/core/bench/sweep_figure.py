@@ -65,10 +65,7 @@ def write_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path) -> Pat
         "(band: min to max)",
         fontsize=10,
     )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _write_ablation_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Path,
@@ -107,6 +104,13 @@ def _write_ablation_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Pa
     n_fl = len({r["flight"] for r in rows})
     fig.suptitle(f"sweep {spec.name}: one setting at a time, {n_fl} {spec.split} flights "
                  "(red: worse than as it is)", fontsize=10)
+    return save_figure(fig, path)
+
+
+def save_figure(fig: Any, path: Path) -> Path:
+    """Lay out, write (110 dpi) and close a sweep's figure."""
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

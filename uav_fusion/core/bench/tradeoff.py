@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from uav_fusion.core.bench.sweep import MULTI_PREFIX, SweepSpec, combo_label
+from uav_fusion.core.bench.sweep_figure import save_figure
 
 
 def _mean_over_flights(rows: list[dict[str, Any]], metric: str) -> float:
@@ -69,7 +70,4 @@ def write_tradeoff_figure(rows: list[dict[str, Any]], spec: SweepSpec, path: Pat
     n_fl = len({r["flight"] for r in rows})
     ax.set_title(f"sweep {spec.name}: coverage against false-track time, {n_fl} {spec.split} "
                  "flights", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
