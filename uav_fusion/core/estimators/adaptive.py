@@ -41,7 +41,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
-from uav_fusion.core.estimators.kalman import UPPER_INDEX
+from uav_fusion.core.estimators.kalman import UPPER_INDEX, MotionFilter
 
 if TYPE_CHECKING:
     from uav_fusion.core.estimators.parts import CepRfR, PolarRadarR
@@ -200,9 +200,32 @@ class AdaptiveRfR:
         return {"rf_cep_scale": round(self.scale.sigma, 3), "rf_noise_samples": self.scale.n}
 
 
+def observe_rf_fix(
+    radar: AdaptiveRadarR | None,
+    rf: AdaptiveRfR | None,
+    last_radar_t: float | None,
+    t: float,
+    f: MotionFilter,
+    z: Sequence[float],
+    nis: float,
+    cep_m: float | None,
+) -> None:
+    """An RF fix about to update a confirmed UAV track (filter ``f``, the fix's NIS ``nis``):
+    while the radar holds the track (an update within HELD_S) the fix checks the radar's
+    allowance for correlated errors; otherwise its innovation is a sample of the RF noise."""
+    if last_radar_t is not None and t - last_radar_t <= HELD_S:
+        if radar is not None:
+            radar.check(nis, 2)
+    elif rf is not None:
+        rf.observe(z, *f.mean(), cep_m)
+
+
 def rf_status(rf: AdaptiveRfR | None) -> dict[str, object]:
     """The RF noise estimate's status, or nothing without one."""
     return rf.status() if rf is not None else {}
 
 
-__all__ = ["CEP_PER_SIGMA", "HELD_S", "AdaptiveRadarR", "AdaptiveRfR", "NoiseChannel", "rf_status"]
+__all__ = [
+    "CEP_PER_SIGMA", "HELD_S", "AdaptiveRadarR", "AdaptiveRfR", "NoiseChannel", "observe_rf_fix",
+    "rf_status",
+]

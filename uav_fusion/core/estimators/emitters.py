@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from uav_fusion.core.estimators.adaptive import HELD_S
+from uav_fusion.core.estimators.adaptive import observe_rf_fix
 from uav_fusion.core.estimators.kalman import PackedR
 from uav_fusion.core.estimators.parts import MofN, rf_start, scale_packed
 from uav_fusion.core.records import RfAttempt
@@ -122,12 +122,10 @@ class Emitters:
         hit = n <= mt._g2
         if hit:
             w = mt.robust.weight(n, 2)
-            if tr.confirmed:  # measurement.adaptive, before the update (see the tracker's)
-                held = tr.last_radar_t is not None and t - tr.last_radar_t <= HELD_S
-                if held and mt.front.adaptive is not None:
-                    mt.front.adaptive.check(n, 2)
-                elif not held and mt.rf_adaptive is not None:
-                    mt.rf_adaptive.observe(z, *f.mean(), cep)
+            if tr.confirmed:  # measurement.adaptive, before the update
+                observe_rf_fix(
+                    mt.front.adaptive, mt.rf_adaptive, tr.last_radar_t, t, f, z, n, cep
+                )
             f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             mt._accept(tr, t)
         if tr.mofn is not None:

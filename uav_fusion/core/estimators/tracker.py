@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from uav_fusion.core.estimators.adaptive import HELD_S, rf_status
+from uav_fusion.core.estimators.adaptive import observe_rf_fix, rf_status
 from uav_fusion.core.estimators.follow import RadarFollower
 from uav_fusion.core.estimators.gates import PhysicalGates, horizontal_nis, rf_move
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
@@ -499,7 +499,9 @@ class Tracker:
                 self._count("rf_held")
                 return [self._step(t, RF, DISCARDED, "held", nis, z, None)]
             w = self.robust.weight(nis, 2)
-            self._adapt_rf(t, f, z, nis, a.cep)
+            # measurement.adaptive (adaptive.py), before the fix's update
+            ad_radar, ad_rf = self.front.adaptive, self.rf_adaptive
+            observe_rf_fix(ad_radar, ad_rf, self.last_3d_t, t, f, z, nis, a.cep)
             f.update(z, scale_packed(r, 1.0 / w) if w != 1.0 else r)
             return [self._used(t, RF, nis, z, None, None, w)]
         if gates.rf_outside(t, a.e, a.n, var, max(2, self.profile.confirm_m)):
@@ -509,19 +511,6 @@ class Tracker:
                 return [self._start_rf(t, z, r)]
             return [self._step(t, RF, DISCARDED, "no_track", None, z, None)]
         return [self._rejected(t, RF, nis, z, None, None)]
-
-    def _adapt_rf(
-        self, t: float, f: MotionFilter, z: tuple[float, ...], nis: float, cep: float | None
-    ) -> None:
-        """measurement.adaptive (adaptive.py), before the fix's update: while the radar
-        holds the track the fix checks the radar's allowance for correlated errors;
-        otherwise its innovation is a sample of the RF noise."""
-        ad = self.front.adaptive
-        held = self.last_3d_t is not None and t - self.last_3d_t <= HELD_S
-        if held and ad is not None:
-            ad.check(nis, 2)
-        elif not held and self.rf_adaptive is not None:
-            self.rf_adaptive.observe(z, *f.mean(), cep)
 
     def _coarse_check(self, t: float, z: tuple[float, ...], r: PackedR, var: float) -> None:
         """A fix too coarse to update the track still says whether the track is near the
