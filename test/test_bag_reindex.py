@@ -211,6 +211,23 @@ def test_file_cut_mid_chunk_keeps_its_whole_chunks(tmp_path: Path) -> None:
     assert xs_rosbags(bag) == [float(i) for i in range(rep.message_count)]
 
 
+def test_a_complete_part_in_its_own_folder_moves_up_and_the_folder_goes(tmp_path: Path) -> None:
+    """Killed just after a split, the recorder leaves the part it had closed in its folder,
+    whole: reindex moves it up beside the others and removes the emptied folder."""
+    w = BagWriter(tmp_path / "b")
+    w.add_topic("/a", PS)
+    for i in range(50):
+        w.write("/a", T0 + i * 1_000_000, point(i))
+    w.close()
+    bag = tmp_path / "split"
+    (bag / "split_0").mkdir(parents=True)
+    shutil.copy(tmp_path / "b" / "b_0.mcap", bag / "split_0" / "split_0.mcap")
+    rep = reindex(bag)
+    assert rep.message_count == 50 and rep.files[0].status == "complete"
+    assert not any(p.is_dir() for p in bag.iterdir())
+    assert xs_rosbags(bag) == [float(i) for i in range(50)]
+
+
 def test_lost_metadata_of_a_complete_bag_comes_back(tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / "default_flight"

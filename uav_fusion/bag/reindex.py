@@ -379,8 +379,10 @@ def reindex(
         if is_complete(path):
             info = _scan_complete(path)
             if dest != path and not dry_run:
+                # a part the recorder had just closed in its own folder when it stopped
                 path.replace(dest)
                 info.path = dest
+                _remove_part_dir(path.parent)
             reports.append(FileReport(dest, "complete", info.count))
             infos.append(info)
             say(f"{path.name}: complete, {info.count} messages")
