@@ -108,14 +108,17 @@ def _imm(**changes: Any) -> dict[str, Any]:
             r"association\.ghost\.sigmas must be a number >= 0",
         ),
         (
-            lambda d: d["update"].update(notch_sigma_mps=-0.5),
-            r"update\.notch_sigma_mps must be a number > 0",
+            lambda d: d["update"].update(hold_sigma_mps=-0.5),
+            r"update\.hold_sigma_mps must be a number > 0",
         ),
         (
-            lambda d: d["update"].update(notch_after_s=-1.0),
-            r"update\.notch_after_s must be a number >= 0 or null",
+            lambda d: d["update"].update(hold_after_s=-1.0),
+            r"update\.hold_after_s must be a number >= 0 or null",
         ),
-        (lambda d: d["update"].update(notch_range_m=0.0), r"update\.notch_range_m must be a num"),
+        (
+            lambda d: d["update"].update(notch_range_m=1000.0),
+            r"'update\.notch_range_m' is no longer a key: .*inside the 3D range gate",
+        ),
         (
             lambda d: d["association"]["takeover"].update(reach_margin_m=-5.0),
             r"association\.takeover\.reach_margin_m must be a number >= 0",
@@ -452,7 +455,7 @@ class HoverScene(Scene):
 def test_a_hover_the_radar_cannot_see_stops_the_coast_drifting(site: Site) -> None:
     # in the hover the radar has no report (the Doppler notch) and no RF fix comes: the
     # track coasts 20 s; the radar would see the UAV there unless its radial speed were
-    # about 0, so after update.notch_after_s the track's radial speed is measured as 0
+    # about 0, so after update.hold_after_s the track's radial speed is measured as 0
     a, b = HoverScene.HOVER
     t_end = b - 0.25  # the last radar frame of the hover
 
@@ -475,14 +478,21 @@ def test_a_hover_the_radar_cannot_see_stops_the_coast_drifting(site: Site) -> No
         return float(np.linalg.norm(np.asarray(x[:3]) - sc.uav(t_end))), tracker
 
     prof = load_profile("tracker")
-    assert prof.notch_after_s is not None and prof.notch_after_s < 10.0
+    assert prof.hold_after_s is not None and prof.hold_after_s < 10.0
     err, tracker = error_at_hover_end(prof)
     assert tracker.counters.get("notch", 0) > 0
     assert err < 40.0
     # without it the track flies on at 6 m/s: more than 80 m off by the end of the hover
-    err0, tracker0 = error_at_hover_end(dataclasses.replace(prof, notch_after_s=None))
+    err0, tracker0 = error_at_hover_end(dataclasses.replace(prof, hold_after_s=None))
     assert tracker0.counters.get("notch", 0) == 0
     assert err0 > 80.0
+    # the radar would see the UAV only inside its 3D range gate: a gate ending 20 m short of
+    # the hover holds nothing; one 60 m beyond it does (the coasting track has flown on
+    # 6 m/s x 5 s = 30 m outwards when the hold starts)
+    rng = float(np.linalg.norm(HoverScene(site).uav(a) - site.radar.enu))
+    for gate, held in ((rng - 20.0, False), (rng + 60.0, True)):
+        _, t_gate = error_at_hover_end(prof.with_changes(range_gate_m=gate))
+        assert (t_gate.counters.get("notch", 0) > 0) is held, gate
 
 
 def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
@@ -504,7 +514,7 @@ def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
 
 def _rule_alone() -> Profile:
     """The tracker without the radial-speed pseudo-measurement (which narrows the gate)."""
-    return dataclasses.replace(load_profile("tracker"), notch_after_s=None)
+    return dataclasses.replace(load_profile("tracker"), hold_after_s=None)
 
 
 def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site: Site) -> None:
@@ -979,18 +989,18 @@ def test_a_fix_too_coarse_for_an_update_may_still_support_the_object_it_fits(
 
 
 @pytest.mark.parametrize(
-    ("rcs_dbsm", "min_rcs", "vehicle"),
+    ("rcs_dbsm", "large_rcs", "vehicle"),
     [
-        (-12.0, -100.0, True),  # off (the default): every low moving object
         (-12.0, 0.0, False),  # a small target moving low: a UAV far out or taking off
         (9.0, 0.0, True),  # a car-sized one
         (None, 0.0, True),  # no RCS reported: counted as large, the term stays
+        (-12.0, -20.0, True),  # a bound below its RCS: too large for a small UAV
     ],
 )
 def test_a_low_moving_object_is_a_ground_vehicle_only_if_it_is_large(
-    rcs_dbsm: float | None, min_rcs: float, vehicle: bool
+    rcs_dbsm: float | None, large_rcs: float, vehicle: bool
 ) -> None:
-    cfg = dataclasses.replace(ScoreConfig(), vehicle_min_rcs_dbsm=min_rcs)
+    cfg = dataclasses.replace(ScoreConfig(), large_rcs_dbsm=large_rcs)
     table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 20.0**2)))
     rng = np.random.default_rng(3)
     for k in range(40):  # 10 s at 13 m/s, 1 m up

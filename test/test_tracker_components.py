@@ -333,7 +333,7 @@ def test_imm_predict_to_leaves_the_filter_alone_and_zero_time_is_no_step() -> No
 @pytest.mark.parametrize("flat", [False, True])
 def test_a_track_starts_level_from_an_object_seen_climbing(flat: bool) -> None:
     """The object's filter has followed a take-off climb at 3 m/s for 8 s; a track started
-    from it keeps the object's position but starts level (climb 0 +- vz_hold_sigma_mps)."""
+    from it keeps the object's position but starts level (climb 0 +- hold_sigma_mps)."""
     from uav_fusion.core.estimators import load_profile
     from uav_fusion.core.estimators.objects import ObjectTable
     from uav_fusion.core.profiles.settings import ScoreConfig
@@ -346,7 +346,7 @@ def test_a_track_starts_level_from_an_object_seen_climbing(flat: bool) -> None:
                                       (0.0, 0.0, -3.0), 0.9, None, -12.0))  # fmt: skip
     assert obj.kf is not None and obj.kf.x[5] > 2.0  # the object climbs
     x, P = object_start(obj, profile, flat)
-    assert x[5] == 0.0 and P[5, 5] == pytest.approx(profile.vz_hold_sigma_mps**2)
+    assert x[5] == 0.0 and P[5, 5] == pytest.approx(profile.hold_sigma_mps**2)
     assert not P[5, :5].any() and not P[:5, 5].any()
     assert x[:2] == pytest.approx(list(obj.kf.x[:2]))
     if flat:  # beyond the 3D gate: the RF start's height prior instead of the object's

@@ -340,7 +340,7 @@ def observable_figures(s: GridSamples) -> tuple[float, float]:
 
 
 # the single-UAV output rule: published until max_coast_s after the last update
-SINGLE_RULE = MultiSettings(emitter_misses=None, output_coast_s=None, radar_output_s=None)
+SINGLE_RULE = MultiSettings(emitter_misses=None, output_coast_s=None)
 
 
 def _run_single_pair(

@@ -10,7 +10,7 @@ gate it falls in, which then carries that emitter; otherwise it starts a tentati
 that emitter, confirmed by M of N fixes as in the single-UAV tracker. A fix without a
 frequency is one emitter of its own (``unknown``). Fixes with a CEP above
 ``measurement.rf.max_cep_m`` are discarded. Before an update, a track without a 3D radar
-update for ``update.vz_hold_after_s`` has its climb rate held near zero.
+update for ``update.hold_after_s`` has its climb rate held near zero.
 """
 
 from __future__ import annotations
@@ -112,11 +112,11 @@ class Emitters:
         after ``emitter_misses`` misses in a row the track loses its emitter."""
         mt = self.mt
         f = tr.filter
-        hold = mt.profile.vz_hold_after_s
+        hold = mt.profile.hold_after_s
         if hold is not None and (tr.last_radar_t is None or t - tr.last_radar_t > hold):
             # no 3D measurement for a while: hold the climb rate near 0 (as the single-UAV
             # tracker does) instead of letting a stale one run away
-            sd = mt.profile.vz_hold_sigma_mps
+            sd = mt.profile.hold_sigma_mps
             f.update_scalar(5, 0.0, sd * sd)
         n = f.nis(z, r)
         hit = n <= mt._g2

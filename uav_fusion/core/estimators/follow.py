@@ -23,8 +23,8 @@ score):
   ``init_min_reports`` reports starts a confirmed track from its own filter's state; a
   tentative RF track is confirmed by a strong report inside its gate or superseded by one.
 
-With ``update.notch_after_s``: no radar update for that long with the track inside
-``update.notch_range_m`` of the radar means the UAV hovers in the Doppler notch, so a radial
+With ``update.hold_after_s``: no radar update for that long with the track inside
+the 3D range gate means the UAV hovers in the Doppler notch, so a radial
 speed of 0 is fused at every frame (:meth:`RadarFollower.notch`).
 """
 
@@ -61,15 +61,15 @@ class RadarFollower:
         self.challenger: tuple[int, float] | None = None
 
     def notch(self, t: float) -> None:
-        """At a radar frame: no radar update for ``update.notch_after_s`` with the track
-        within ``update.notch_range_m`` of the radar. The radar would see the UAV there
+        """At a radar frame: no radar update for ``update.hold_after_s`` with the track
+        inside the 3D range gate. The radar would see the UAV there
         unless its radial speed sits in the Doppler notch, so a pseudo-measurement radial
-        speed = 0 (sigma ``update.notch_sigma_mps``) is fused (a hover stops the coast's
+        speed = 0 (sigma ``update.hold_sigma_mps``) is fused (a hover stops the coast's
         drift). No step is made; the next step carries the state."""
         tr = self.tr
         p = tr.profile
         f = tr.filter
-        after = p.notch_after_s
+        after = p.hold_after_s
         last = tr.last_radar_t
         if f is None or not tr.confirmed or after is None or last is None or t - last < after:
             return
@@ -77,9 +77,9 @@ class RadarFollower:
         rx, ry, rz = tr.front.radar_pos
         dx, dy, dz = x[0] - rx, x[1] - ry, x[2] - rz
         rng = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if not 1.0 < rng <= p.notch_range_m:
+        if rng <= 1.0 or rng * rng > tr.front.gate2:
             return
-        sd = p.notch_sigma_mps
+        sd = p.hold_sigma_mps
         f.update_linear((0.0, 0.0, 0.0, dx / rng, dy / rng, dz / rng), 0.0, sd * sd)
         tr._count("notch")
 

@@ -36,7 +36,7 @@ RF fixes go to the track of their emitter (:mod:`~uav_fusion.core.estimators.emi
 
 The output (:meth:`MultiTracker.outputs`, and so its fixed-rate epochs) holds a confirmed track
 while its last accepted measurement is at most ``output_coast_s`` old and, inside the radar's
-range gate, its last radar update at most ``radar_output_s`` old (3 s each; the track itself
+range gate, its last radar update too (3 s; the track itself
 lives until the profile's ``max_coast_s``, so a UAV found again keeps its id): a track whose
 radar object has gone stops being published before it drifts away as a false track, and an
 emitter the radar does not see inside its cover (a UAV on its pad with its link on) is not
@@ -254,14 +254,15 @@ class MultiTracker:
     def _published(self, tr: UavTrack, t: float, x: list[float]) -> bool:
         """Whether a confirmed track at ``t`` (position ``x``) is output: its last update at
         most ``output_coast_s`` old and, inside the radar's range gate, its last radar update
-        at most ``radar_output_s`` old (an emitter inside radar cover that the radar does not
+        too (an emitter inside radar cover that the radar does not
         see is on the ground: a UAV on its pad with its link on, or one that has landed)."""
         st = self.settings
-        if st.output_coast_s is not None and t - tr.last_update_t > st.output_coast_s:
-            return False
-        if st.radar_output_s is None:
+        coast = st.output_coast_s
+        if coast is None:
             return True
-        if tr.last_radar_t is not None and t - tr.last_radar_t <= st.radar_output_s:
+        if t - tr.last_update_t > coast:
+            return False
+        if tr.last_radar_t is not None and t - tr.last_radar_t <= coast:
             return True
         rx, ry, rz = self.front.radar_pos
         d2 = (x[0] - rx) ** 2 + (x[1] - ry) ** 2 + (x[2] - rz) ** 2
@@ -509,7 +510,7 @@ class MultiTracker:
         """Before an update without height: hold the climb rate near 0 and keep the track
         above the ground (soft: a pseudo-measurement at ground level when it is below)."""
         p = self.profile
-        sd = p.vz_hold_sigma_mps
+        sd = p.hold_sigma_mps
         f = tr.filter
         f.update_scalar(5, 0.0, sd * sd)
         x, _ = f.mean()

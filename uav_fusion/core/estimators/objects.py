@@ -16,10 +16,10 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   below the ground), is a multipath ghost (``-below_ground_weight``); one older than
   ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is
   clutter (``-stationary_weight``); one that moves but stays below ``ground_alt_m`` is a
-  ground vehicle (``-ground_weight``) if its mean RCS is at least ``vehicle_min_rcs_dbsm``
-  (a car is a large radar target; a small UAV taking off, or flying low far out where its
-  reports scatter around the ground, is not; the default -100 dBsm takes every object, and
-  one without RCS reports counts as large); one
+  ground vehicle (``-ground_weight``) if its mean RCS is too large for a small UAV (at least
+  ``large_rcs_dbsm``: a car is a large radar target; a small UAV taking off, or flying low
+  far out where its reports scatter around the ground, is not; an object without RCS
+  reports counts as large); one
   whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
   ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
   bird (``-erratic_weight``);
@@ -154,7 +154,7 @@ class RadarObject:
         elif (
             self.up < cfg.ground_alt_m
             and self.n_reports > 1
-            and self.rcs_mean >= cfg.vehicle_min_rcs_dbsm
+            and self.rcs_mean >= cfg.large_rcs_dbsm
         ):
             s -= cfg.ground_weight
         if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:

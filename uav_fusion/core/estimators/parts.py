@@ -418,7 +418,7 @@ def radar_gates2(profile: Profile, site: Site) -> tuple[float, float]:
 
 def object_start(obj: RadarObject, profile: Profile, flat: bool) -> tuple[list[float], FloatArray]:
     """A new track's state and covariance from a radar object's own filter, level: its climb
-    rate 0 +- ``vz_hold_sigma_mps``. The object's own climb rate comes from a few seconds of
+    rate 0 +- ``hold_sigma_mps``. The object's own climb rate comes from a few seconds of
     reports whose heights scatter by tens of metres, and the track's stiff vertical would keep
     a wrong one for a minute (a track born in a take-off climb overshoots the level-off by
     70 m); a UAV mostly holds its height, and a steady climb is learnt from the heights.
@@ -430,7 +430,7 @@ def object_start(obj: RadarObject, profile: Profile, flat: bool) -> tuple[list[f
     P = expand_upper(kf.P)
     x[5] = 0.0
     P[5, :] = P[:, 5] = 0.0
-    P[5, 5] = profile.vz_hold_sigma_mps**2
+    P[5, 5] = profile.hold_sigma_mps**2
     if flat:
         x[2] = profile.rf_init_altitude_m
         P[2, :] = P[:, 2] = 0.0

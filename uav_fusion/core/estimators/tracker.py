@@ -409,7 +409,7 @@ class Tracker:
         if cands:
             for i, step in self.follow.frame(t, cands, rs, far, zs):
                 out[i] = step
-        if self.profile.notch_after_s is not None:
+        if self.profile.hold_after_s is not None:
             self.follow.notch(t)
         return [s for s in out if s is not None]
 
@@ -522,11 +522,11 @@ class Tracker:
             self._drop("rf_disagrees")
 
     def _hold_vz(self, t: float, f: MotionFilter) -> None:
-        hold = self.profile.vz_hold_after_s
+        hold = self.profile.hold_after_s
         if hold is not None and (self.last_3d_t is None or t - self.last_3d_t > hold):
             # no 3D measurement for a while: the vertical velocity is unobservable from 2D
             # measurements, hold it near zero instead of letting a stale climb rate run away
-            sd = self.profile.vz_hold_sigma_mps
+            sd = self.profile.hold_sigma_mps
             f.update_scalar(5, 0.0, sd * sd)
             self._count("vz_hold")
 

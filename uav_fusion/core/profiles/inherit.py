@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.profiles.schema import BY_PATH, SECTIONS, belongs
+from uav_fusion.core.profiles.schema import BY_PATH, RETIRED, SECTIONS, belongs
 from uav_fusion.core.yamlio import read_yaml_file
 from uav_fusion.resources import config_path
 
@@ -62,6 +62,8 @@ def _unknown(path: str, where: str) -> ConfigError:
             f"{where}: association.mode is no longer a key: the estimator is chosen by the "
             "top-level key 'estimator: paper | tracker | multi' (track_score: tracker)"
         )
+    if path in RETIRED:
+        return ConfigError(f"{where}: '{path}' is no longer a key: {RETIRED[path]}")
     section, _, name = path.rpartition(".")
     there = [p for p in belongs(name) if p != path]
     if there:

@@ -96,13 +96,11 @@ class Profile:
     robust: str = "none"  # none | student_t | huber
     robust_dof: float = 4.0
     robust_huber_k: float = 1.5
-    vz_hold_after_s: float | None = None  # RF-only: pseudo-measurement vz = 0 after this long
-    vz_hold_sigma_mps: float = 1.0
-    # no radar update for this long with the track inside notch_range_m of the radar:
-    # pseudo-measurement radial speed = 0 (the UAV hovers in the Doppler notch); None: off
-    notch_after_s: float | None = None
-    notch_sigma_mps: float = 1.0
-    notch_range_m: float = 1000.0
+    # no radar update for this long: pseudo-measurements hold what the radar no longer
+    # measures (RF fixes: climb rate 0; inside the 3D range gate: radial speed 0, a hover in
+    # the Doppler notch); None: never
+    hold_after_s: float | None = None
+    hold_sigma_mps: float = 1.0  # their standard deviation, and a new track's climb rate's
     estimator: str = "paper"  # paper | tracker | multi
     score: ScoreConfig = field(default_factory=ScoreConfig)
     smoother_lag_s: float | None = None  # fixed-lag smoothing of the tracker's steps

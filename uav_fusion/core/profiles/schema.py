@@ -230,19 +230,14 @@ _UPDATE = _group(
        choices=("none", "student_t", "huber")),
     _k("dof", "robust_dof", NUMBER, DESIGN, "student_t: degrees of freedom", bounds="> 0"),
     _k("huber_k", "robust_huber_k", NUMBER, DESIGN, "huber: threshold", bounds="> 0"),
-    _k("vz_hold_after_s", "vz_hold_after_s", NUMBER, DESIGN, "without a radar update for this "
-       "long, each RF fix first applies vz = 0 (2D fixes cannot see the climb rate)", unit="s",
-       bounds=">= 0", null="never"),
-    _k("vz_hold_sigma_mps", "vz_hold_sigma_mps", NUMBER, DESIGN, "standard deviation of that "
-       "pseudo-measurement, and of the climb rate a track starts with (0: tracks start level)",
+    _k("hold_after_s", "hold_after_s", NUMBER, DESIGN, "without a radar update for this long, "
+       "pseudo-measurements hold what the radar no longer measures: each RF fix first applies "
+       "climb rate = 0 (2D fixes cannot see it), and, for the single-UAV tracker inside the 3D "
+       "range gate, each radar frame applies radial speed = 0 (the radar would see the UAV "
+       "there unless it hovers in the Doppler notch)", unit="s", bounds=">= 0", null="never"),
+    _k("hold_sigma_mps", "hold_sigma_mps", NUMBER, DESIGN, "standard deviation of those "
+       "pseudo-measurements, and of the climb rate a track starts with (tracks start level)",
        unit="m/s", bounds="> 0"),
-    _k("notch_after_s", "notch_after_s", NUMBER, DESIGN, "single-UAV tracker: without a radar "
-       "update for this long within notch_range_m, each radar frame applies radial speed = 0 "
-       "(a hover in the Doppler notch)", unit="s", bounds=">= 0", null="never"),
-    _k("notch_sigma_mps", "notch_sigma_mps", NUMBER, DESIGN, "standard deviation of that "
-       "pseudo-measurement", unit="m/s", bounds="> 0"),
-    _k("notch_range_m", "notch_range_m", NUMBER, SPEC, "range within which the radar would see "
-       "a UAV that is not in its notch", unit="m", bounds="> 0"),
 )
 _ASSOCIATION = (
     *_group("association.class", TRACKER,
@@ -264,9 +259,8 @@ _ASSOCIATION = (
     *_group("association.vehicle", TRACKER,
         _s("ground_alt_m", "ground_alt_m", NUMBER, PHYSICAL, "an object moving below this "
            "height ...", unit="m", bounds=">= 0"),
-        _s("weight", "ground_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
-        _s("min_rcs_dbsm", "vehicle_min_rcs_dbsm", NUMBER, PHYSICAL, "... and only with a mean "
-           "RCS of at least this (a car is a large target; -100: any)", unit="dBsm"),
+        _s("weight", "ground_weight", NUMBER, DESIGN, "... loses this much, when its mean RCS "
+           "is too large for a small UAV (association.size.large_rcs_dbsm)", bounds=">= 0"),
     ),
     *_group("association.ghost", TRACKER,
         _s("below_ground_m", "below_ground_m", NUMBER, PHYSICAL, "an object whose mean height "
@@ -284,8 +278,8 @@ _ASSOCIATION = (
         _s("weight", "erratic_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
     ),
     *_group("association.size", TRACKER,
-        _s("large_rcs_dbsm", "large_rcs_dbsm", NUMBER, PHYSICAL, "an object whose mean RCS is "
-           "at least this (100: off) ...", unit="dBsm"),
+        _s("large_rcs_dbsm", "large_rcs_dbsm", NUMBER, PHYSICAL, "a mean RCS of at least this "
+           "is too large for a small UAV: such an object ...", unit="dBsm"),
         _s("weight", "large_rcs_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
     ),
     *_group("association.rf", TRACKER,
@@ -378,9 +372,9 @@ _MULTI = _group(
     _m("flat_below_ground", BOOL, DESIGN, "a report below association.ghost.below_ground_m "
        "updates east and north only"),
     _m("output_coast_s", NUMBER, FITTED, "a confirmed track is published while its last "
-       "update is this recent", unit="s", bounds=">= 0", null="while it lives", fit=TUNED),
-    _m("radar_output_s", NUMBER, DESIGN, "... and, inside radar cover, its last radar update",
-       unit="s", bounds=">= 0", null="no such rule"),
+       "update is this recent and, inside radar cover, its last radar update too (an emitter "
+       "there that the radar does not see is on the ground)", unit="s", bounds=">= 0",
+       null="while it lives", fit=TUNED),
     _m("emitter_misses", INTEGER, DESIGN, "this many fixes of its emitter in a row outside a "
        "track's gate unlink the emitter", bounds=">= 1", null="never"),
     _m("emitter_follow_min", NUMBER, DESIGN, "an object scoring this (below follow_min) that "
@@ -404,6 +398,20 @@ KEYS: tuple[Key, ...] = (
     *_ASSOCIATION, *_SMOOTHER, *_MULTI, *_EVALUATION,
 )
 BY_PATH: dict[str, Key] = {k.path: k for k in KEYS}
+
+#: Keys that have left the schema, with what a profile that still sets one should do.
+RETIRED: dict[str, str] = {
+    "update.vz_hold_after_s": "it is update.hold_after_s",
+    "update.vz_hold_sigma_mps": "it is update.hold_sigma_mps",
+    "update.notch_after_s": "the Doppler-notch hold starts after update.hold_after_s",
+    "update.notch_sigma_mps": "the Doppler-notch hold uses update.hold_sigma_mps",
+    "update.notch_range_m": "the Doppler-notch hold applies inside the 3D range gate "
+    "(gating.range_gate_m)",
+    "association.vehicle.min_rcs_dbsm": "a low moving object is a vehicle when its RCS is at "
+    "least association.size.large_rcs_dbsm",
+    "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
+    "recent as multi.output_coast_s",
+}
 
 
 def find(path: str) -> Key | None:

@@ -25,7 +25,7 @@ class MultiSettings:
     velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
     velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
     output_coast_s: float | None = 3.0  # published while the last update is this recent
-    radar_output_s: float | None = 3.0  # inside radar cover: ... and the last radar update
+    # and, inside radar cover, the last radar update too (None: while it lives)
     emitter_misses: int | None = 3  # this many fixes of its emitter in a row outside a
     # track's gate unlink the emitter from it (None: never)
     tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
@@ -53,14 +53,13 @@ class ScoreConfig:
     stationary_weight: float = 5.0
     ground_alt_m: float = 4.0
     ground_weight: float = 3.0
-    vehicle_min_rcs_dbsm: float = -100.0  # -100: every low moving object may be a vehicle
     below_ground_m: float = 5.0
     below_ground_weight: float = 8.0
     below_ground_sigmas: float = 0.0
     erratic_nis: float = 6.0
     bird_rcs_dbsm: float = -15.0
     erratic_weight: float = 2.0
-    large_rcs_dbsm: float = 100.0  # 100: off
+    large_rcs_dbsm: float = 0.0  # a small UAV's RCS is below 1 m^2 (the paper: up to -2.6 dBsm)
     large_rcs_weight: float = 5.0
     rf_weight: float = 1.0
     rf_tau_s: float = 30.0
