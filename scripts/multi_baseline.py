@@ -30,7 +30,7 @@ frame, or one RF fix):
   only out to ``range_gate_m`` and horizontally out to ``far_gate_m``, and this baseline has
   no horizontal-only mode; on the multi-UAV tune half, class filter 0.7, a 1000 m gate gave
   55.6 m GOSPA, 1500 m and 2500 m 49.6 m; ``--range-gate-m``), coasted reports
-  (``association.object.skip_radar_coasts``: velocity and RCS repeating the same radar track's
+  (as the tracker does: velocity and RCS repeating the same radar track's
   previous report) and fixes with a CEP above
   ``rf.max_cep_m`` are dropped, as ours does; no UAV score or classifier: every other radar
   report is a detection (``--radar-min-uav-prob P``: a variant that also drops the reports
@@ -233,7 +233,6 @@ class Baseline:
             gate = self.range_gate_m
         self.gate2 = float(gate) ** 2
         self.radar_pos = tuple(float(v) for v in self.site.radar.enu)
-        self.skip_coasts = p.score.skip_radar_coasts
         self.signatures: dict[int, tuple[object, object]] = {}
         self.dropped: dict[str, int] = {}
 
@@ -259,7 +258,7 @@ class Baseline:
             if (trk.e - rx) ** 2 + (trk.n - ry) ** 2 + (trk.u - rz) ** 2 > self.gate2:
                 self._drop("range_gate")
                 continue
-            if coasting and self.skip_coasts:
+            if coasting:
                 self._drop("coast")
                 continue
             pmin = self.min_radar_uav_prob

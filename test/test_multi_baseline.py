@@ -93,7 +93,6 @@ def test_detections_carry_our_r_and_the_same_drops(
     H = np.asarray(d.measurement_model.matrix())[:, mb.SS_TO_OURS]
     np.testing.assert_array_equal(H, np.hstack([np.eye(3), np.zeros((3, 3))]))
     # the same report again (velocity and RCS repeated): a coast, dropped
-    assert profile.score.skip_radar_coasts
     assert not b.radar_detections(RadarFrame(10.5, (mk(1, p, (1.0, 2.0, 0.0)),)))
     assert b.dropped == {"range_gate": 1, "coast": 1}
     # the baseline has no horizontal-only updates: 3D detections out to the far gate (2000 m

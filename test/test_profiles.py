@@ -51,6 +51,9 @@ MOVED = {
     "notch_range_m": "the 3D range gate (1000 m in both)",
     "multi.radar_output_s": "multi.output_coast_s (3 s in both)",
     "score.vehicle_min_rcs_dbsm": "association.size.large_rcs_dbsm (0 dBsm in both)",
+    "score.age_full_s": "association.class.tau_s (5 s in both)",
+    "score.skip_radar_coasts": "always: a coast is the radar's prediction, not a measurement",
+    "score.rf_nearest_only": "always: a fix credits the one object it fits best",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}
@@ -314,3 +317,5 @@ def test_merged_keys_keep_the_values_they_replace() -> None:
     assert then["notch_range_m"] == now.range_gate_m
     assert then["multi"]["radar_output_s"] == now.multi.output_coast_s
     assert then["score"]["vehicle_min_rcs_dbsm"] == now.score.large_rcs_dbsm
+    assert RETUNED["tracker"]["score.class_tau_s"] == then["score"]["age_full_s"]
+    assert then["score"]["skip_radar_coasts"] and then["score"]["rf_nearest_only"]

@@ -83,12 +83,8 @@ def _imm(**changes: Any) -> dict[str, Any]:
         (lambda d: d["association"].update(speed=3), "unknown key 'association.speed'"),
         (lambda d: d.update(smoother={"lag_s": -1.0}), r"smoother\.lag_s"),
         (
-            lambda d: d["association"]["object"].update(skip_radar_coasts="yes"),
-            r"association\.object\.skip_radar_coasts must be true or false",
-        ),
-        (
-            lambda d: d["association"]["rf"].update(nearest_only=1),
-            r"association\.rf\.nearest_only must be true or false",
+            lambda d: d["association"].update(object={"skip_radar_coasts": True}),
+            r"'association\.object\.skip_radar_coasts' is no longer a key: a radar coast",
         ),
         (
             lambda d: d["measurement"]["radar"].update(low_el_gain=-1.0),
@@ -374,9 +370,9 @@ def test_the_large_rcs_term_needs_an_rcs(site: Site) -> None:
 
 
 def test_a_coasted_report_leaves_the_objects_filter_where_it_was(site: Site) -> None:
-    """A report repeating its radar track's velocity and RCS is the radar's prediction: with
-    ``skip_radar_coasts`` the object's filter does not take it, the next real report is
-    predicted over the whole gap, and an RF fix meets the filter's state at its own time."""
+    """A report repeating its radar track's velocity and RCS is the radar's prediction: the
+    object's filter does not take it, the next real report is predicted over the whole gap,
+    and an RF fix meets the filter's state at its own time."""
     r0 = np.array(site.radar.enu, dtype=float)
     vel = (0.0, 6.0, 0.0)  # NED: 6 m/s east
 
@@ -384,26 +380,22 @@ def test_a_coasted_report_leaves_the_objects_filter_where_it_was(site: Site) -> 
         e, n, u = map(float, r0 + np.array([east, 300.0, 40.0]))
         return RadarTrack(t, 5, 0.0, 0.0, 0.0, e, n, u, vel, 0.6, None, rcs)
 
-    tables = {}
-    for skip in (True, False):
-        cfg = ScoreConfig(skip_radar_coasts=skip)
-        table = ObjectTable(cfg, FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
-        for k in range(40):  # 10 s of real reports along the track
-            table.update(report(0.25 * k, 200.0 + 1.5 * k, -10.0 - 0.01 * k))
-        obj = table.objects[5]
-        x_before = list(obj.kf.x)
-        for k in range(40, 56):  # 4 s of coasts: a report 40 m off, velocity and RCS repeated
-            table.update(report(0.25 * k, 260.0 + 40.0, -10.39))
-        assert obj.coasting and obj.last_t == pytest.approx(13.75)
-        tables[skip] = (table, obj, x_before)
-    table, obj, x_before = tables[True]
+    table = ObjectTable(ScoreConfig(), FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
+    for k in range(40):  # 10 s of real reports along the track
+        table.update(report(0.25 * k, 200.0 + 1.5 * k, -10.0 - 0.01 * k))
+    obj = table.objects[5]
+    x_before = list(obj.kf.x)
+    for k in range(40, 56):  # 4 s of coasts: a report 40 m off, velocity and RCS repeated
+        table.update(report(0.25 * k, 260.0 + 40.0, -10.39))
+    assert obj.coasting and obj.last_t == pytest.approx(13.75)
     assert obj.kf.x == x_before and obj.kf_t == pytest.approx(9.75)
-    # a fine RF fix where the object's own motion puts it at 14 s is credited
+    # a fine RF fix where the object's own motion puts it at 14 s is credited (had the
+    # coasts updated the filter, it would sit 40 m east of there)
     e14, n14 = map(float, r0[:2] + np.array([200.0 + 6.0 * 14.0, 300.0]))
     assert table.rf_fix(14.0, e14, n14, 4.0) == 1
-    # without skip_radar_coasts the coasts pull the filter towards the coasted position
-    _, obj_all, _ = tables[False]
-    assert obj_all.kf_t == pytest.approx(13.75) and obj_all.kf.x[0] > x_before[0] + 20.0
+    # the next real report breaks the coast and updates the filter again
+    table.update(report(14.0, 200.0 + 6.0 * 14.0, -10.5))
+    assert not obj.coasting and obj.kf_t == pytest.approx(14.0)
 
 
 def test_a_low_class_probability_uav_with_rf_agreement_is_kept(site: Site) -> None:
@@ -854,7 +846,8 @@ def test_invalid_reports_never_reach_the_state(site: Site) -> None:
 
 def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
     """A report repeating its radar track's velocity and RCS is the radar's own prediction
-    (a coast): with ``skip_radar_coasts`` the fused track does not take it, without it does."""
+    (a coast): the fused track does not take it; the same reports with a fresh RCS are
+    fused."""
     sc = Scene(site, seed=7)
     sc.build(60.0)
     frames = []
@@ -879,18 +872,23 @@ def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
             f = RadarFrame(f.t, (coast,))
         frames.append(f)
     sc.frames = frames
-    on = load_profile("tracker")
-    assert on.score.skip_radar_coasts
-    off = on.with_changes(score=dataclasses.replace(on.score, skip_radar_coasts=False))
-    steps_on = run_tracker(Tracker(on, site), sc.stream())
-    steps_off = run_tracker(Tracker(off, site), sc.stream())
-    coasts = [s for s in steps_on if s.reason == "coast"]
+    prof = load_profile("tracker")
+    steps = run_tracker(Tracker(prof, site), sc.stream())
+    coasts = [s for s in steps if s.reason == "coast"]
     # every report of the coast repeats the one before it (4 s at 4 Hz); none other does
     assert len(coasts) == 16 and all(30.0 <= s.t < 34.0 for s in coasts)
     assert all(s.status == "discarded" for s in coasts)
-    assert not any(s.reason == "coast" for s in steps_off)
-    used_off = [s for s in steps_off if 30.0 <= s.t < 34.0 and s.updated and s.source == "radar"]
-    assert len(used_off) == 16
+    # the same positions with an RCS that changes from report to report are measurements
+    sc.frames = [
+        RadarFrame(f.t, tuple(
+            dataclasses.replace(r, rcs_dbsm=(r.rcs_dbsm or -10.0) - 0.01 * k) for r in f.tracks
+        )) if 30.0 <= f.t < 34.0 else f
+        for k, f in enumerate(sc.frames)
+    ]  # fmt: skip
+    steps_fresh = run_tracker(Tracker(prof, site), sc.stream())
+    assert not any(s.reason == "coast" for s in steps_fresh)
+    used = [s for s in steps_fresh if 30.0 <= s.t < 34.0 and s.updated and s.source == "radar"]
+    assert len(used) == 16
 
 
 # --- the runner -----------------------------------------------------------------------------
@@ -1045,14 +1043,10 @@ def test_an_emitter_the_radar_does_not_see_yet_supports_the_object_that_appears_
     assert table.objects[9].rf_support == 0.0
 
 
-@pytest.mark.parametrize("nearest_only", [False, True])
-def test_an_rf_fix_credits_every_object_in_its_gate_or_only_the_nearest(
-    nearest_only: bool,
-) -> None:
-    """Two radar objects 20 m apart, both inside the gate of an RF fix 5 m from the first: both
-    gain RF support, or (``rf_nearest_only``) only the first."""
-    cfg = dataclasses.replace(ScoreConfig(), rf_nearest_only=nearest_only)
-    table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
+def test_an_rf_fix_credits_only_the_object_it_fits_best() -> None:
+    """Two radar objects 20 m apart, both inside the gate of an RF fix: only the nearer gains
+    RF support (clutter beside a UAV must not share its emitter)."""
+    table = ObjectTable(ScoreConfig(), FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
     for k in range(5):
         t = 100.0 + k
         for tid, east in ((1, 500.0), (2, 520.0)):
@@ -1060,13 +1054,12 @@ def test_an_rf_fix_credits_every_object_in_its_gate_or_only_the_nearest(
                 RadarTrack(t, tid, 0.0, 0.0, 0.0, east, 300.0, 50.0, (0.0, 0.0, 0.0), 0.5,
                            None, -10.0)
             )  # fmt: skip
-    hits = table.rf_fix(104.5, 505.0, 300.0, 400.0)
     a, b = table.objects[1], table.objects[2]
-    assert a.rf_support == 1.0
-    if nearest_only:
-        assert hits == 1 and b.rf_support == 0.0
-    else:
-        assert hits == 2 and b.rf_support == 1.0
+    assert table.rf_fix(104.5, 509.0, 300.0, 400.0) == 1 and table.credited is a
+    assert (a.rf_support, b.rf_support) == (1.0, 0.0)
+    # 1 m past the midpoint the other one is nearer
+    assert table.rf_fix(104.5, 511.0, 300.0, 400.0) == 1 and table.credited is b
+    assert (a.rf_support, b.rf_support) == (1.0, 1.0)  # the first kept its own fix only
     # a fix outside both gates credits nobody
     assert table.rf_fix(104.5, 900.0, 300.0, 400.0) == 0
 

@@ -343,7 +343,7 @@ def test_a_track_starts_level_from_an_object_seen_climbing(flat: bool) -> None:
     for k in range(33):
         t = 0.25 * k
         obj = table.update(RadarTrack(t, 7, 0.0, 0.0, 0.0, 300.0, 200.0, 3.0 * t,
-                                      (0.0, 0.0, -3.0), 0.9, None, -12.0))  # fmt: skip
+                                      (0.0, 0.0, -3.0), 0.9, None, -12.0 - 0.01 * k))  # fmt: skip
     assert obj.kf is not None and obj.kf.x[5] > 2.0  # the object climbs
     x, P = object_start(obj, profile, flat)
     assert x[5] == 0.0 and P[5, 5] == pytest.approx(profile.hold_sigma_mps**2)

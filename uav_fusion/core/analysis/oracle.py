@@ -139,9 +139,7 @@ class LabelOracle(MultiTracker):
             vehicle = self.vehicle_of_object.get(lab[1])
             if vehicle is None:
                 continue
-            if (d2 > front.gate2 and not d2 <= front.far2) or (
-                cfg.skip_radar_coasts and obj.coasting
-            ):
+            if (d2 > front.gate2 and not d2 <= front.far2) or obj.coasting:
                 continue
             e, n_, u = p3
             z: tuple[float, ...] = p3

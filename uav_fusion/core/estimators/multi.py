@@ -354,9 +354,8 @@ class MultiTracker:
             self._count("rejected_invalid", len(bad))
         gate2 = self.front.gate2
         far2 = self.front.far2
-        skip_coasts = cfg.skip_radar_coasts
         for _, trk, obj, p3, r, d2 in reports:
-            if (d2 > gate2 and not d2 <= far2) or (skip_coasts and obj.coasting):
+            if (d2 > gate2 and not d2 <= far2) or obj.coasting:
                 continue
             e, n_, u = p3
             z: tuple[float, ...] = p3

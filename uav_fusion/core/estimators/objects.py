@@ -29,9 +29,9 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
   horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
   capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
-  evidence of a UAV); with ``rf_nearest_only`` a fix credits only the object it fits best
-  (smallest gate distance), not every object in its gate (clutter beside a UAV, or near a
-  UAV on its pad that the radar does not see, would share the UAV's emitter); a fix too
+  evidence of a UAV); a fix credits only the object it fits best (smallest gate distance),
+  not every object in its gate (clutter beside a UAV, or near a UAV on its pad that the
+  radar does not see, would otherwise share the UAV's emitter); a fix too
   coarse to update a track (CEP above the profile's ``measurement.rf.max_cep_m``) still
   counts here when its CEP is at most ``rf_support_max_cep_m`` (0: never; single-UAV
   tracker only); a fix that credits no object at all (an emitter the radar does not see
@@ -46,12 +46,13 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   while the track's horizontal position standard deviation exceeds ``lost_sigma_m`` (0: no
   limit; after a long coast the gate spans far more than the UAV's neighbourhood, and a
   first report inside it would count as full agreement: ``Tracker``);
-* age: ``age_weight * min(1, age / age_full_s)`` (a track that persists is more likely real).
+* age: ``age_weight * min(1, age / class_tau_s)`` (a track that persists is more likely
+  real; the term is full once the object is as old as its class history's time constant).
 
 A *coasted* report is one whose velocity and RCS repeat the same radar track's previous report
 exactly: the radar's own tracker had no detection for it and reported its prediction
-(:attr:`RadarObject.coasting`). It carries no new measurement; with ``skip_radar_coasts`` the
-fused track does not take it (it would count the radar's prediction as a fresh measurement
+(:attr:`RadarObject.coasting`). It carries no new measurement, so the fused track does not
+take it (it would count the radar's prediction as a fresh measurement
 with independent noise), and neither does the object's own filter (its state then stays at
 its last report that was not a coast, :attr:`RadarObject.kf_t`).
 """
@@ -161,7 +162,7 @@ class RadarObject:
             s -= cfg.erratic_weight
         if self.rcs_seen and self.rcs_mean >= cfg.large_rcs_dbsm:
             s -= cfg.large_rcs_weight
-        # min(rf_max, rf_support_at(last_t)) and min(1, age / age_full_s) as conditionals
+        # min(rf_max, rf_support_at(last_t)) and min(1, age / class_tau_s) as conditionals
         sup = self.rf_support
         if sup != 0.0:
             tau = cfg.rf_tau_s
@@ -169,7 +170,7 @@ class RadarObject:
         rf_max = cfg.rf_max
         s += cfg.rf_weight * (sup if sup < rf_max else rf_max)
         s += cfg.fused_weight * self.fused
-        full = cfg.age_full_s
+        full = cfg.class_tau_s
         if full > 0:
             f = age / full
             s += cfg.age_weight * (f if f < 1.0 else 1.0)
@@ -180,7 +181,7 @@ class ObjectTable:
     """Every radar object of a flight, updated by every report of every frame."""
 
     def __init__(self, cfg: ScoreConfig, radar_r: RadarRModel) -> None:
-        #: the object the last RF fix was credited to (``rf_nearest_only``), or None
+        #: the object the last RF fix was credited to, or None
         self.credited: RadarObject | None = None
         self.cfg = cfg
         self.radar_r = radar_r
@@ -229,7 +230,7 @@ class ObjectTable:
             a = 0.0 if tau <= 0 else 1.0
         else:
             a = 0.0 if tau <= 0 else (math.exp(-dt / tau) if dt > 0 else 1.0)
-            if not (coast and cfg.skip_radar_coasts):
+            if not coast:
                 # a coast is the radar's own prediction: no new measurement for the filter
                 kf.predict(t - obj.kf_t)
                 nis = kf.update3(e, n, u, r)
@@ -350,9 +351,9 @@ class ObjectTable:
         obj.fused_t = t
 
     def rf_fix(self, t: float, e: float, n: float, var_m2: float, key: str | None = None) -> int:
-        """Credit every recent object whose predicted position agrees with an RF fix (of the
-        emitter ``key``, when known); returns the number of objects credited. With
-        ``rf_nearest_only`` the one object credited is :attr:`credited` (else None)."""
+        """Credit the recent object whose predicted position agrees best with an RF fix (of
+        the emitter ``key``, when known), if any inside the fix's gate; returns the number of
+        objects credited (0 or 1). The object credited is :attr:`credited` (else None)."""
         cfg = self.cfg
         hits = 0
         self.credited = None
@@ -374,15 +375,8 @@ class ObjectTable:
             if det <= 0:
                 continue
             d2 = (s11 * de * de - 2.0 * s01 * de * dn + s00 * dn * dn) / det
-            if d2 <= RF_GATE_99_2DOF:
-                if cfg.rf_nearest_only:
-                    if best is None or d2 < best[0]:
-                        best = (d2, obj)
-                    continue
-                obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0
-                obj.rf_t = t
-                obj.rf_key = key
-                hits += 1
+            if d2 <= RF_GATE_99_2DOF and (best is None or d2 < best[0]):
+                best = (d2, obj)
         if best is not None:
             obj = self.credited = best[1]
             obj.rf_support = obj.rf_support_at(t, cfg.rf_tau_s) + 1.0

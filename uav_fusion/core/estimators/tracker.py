@@ -15,13 +15,13 @@ Per radar frame (all reports share one time):
    those inside the far gate: they stay candidates with their horizontal position only (R's
    horizontal block; the climb rate is held near zero before such an update, and a track
    started from one takes the RF start's height prior); reports repeating their radar
-   track's last velocity and RCS are coasts (``coast``, with
-   ``association.object.skip_radar_coasts``);
+   track's last velocity and RCS are coasts (``coast``: the radar's own prediction, no
+   measurement);
 4. the follower decides which candidate updates the track, or starts one
    (:mod:`~uav_fusion.core.estimators.follow`), a restart only where the physical gates allow
    (:mod:`~uav_fusion.core.estimators.gates`).
 
-An RF fix (``ok`` attempts only) credits every radar object it agrees with (and, credited to
+An RF fix (``ok`` attempts only) credits the radar object it agrees with best (and, credited to
 the followed object, registers the radar: :mod:`~uav_fusion.core.estimators.registration`),
 then is gated and fused with its CEP-based R (or coasts; or, if it would move the track far,
 is held for a second fix: the physical gates); without any track it starts a tentative track that
@@ -387,14 +387,13 @@ class Tracker:
         rs: dict[int, PackedR] = {}
         gate2 = self.front.gate2
         cfg = self.cfg
-        skip_coasts = cfg.skip_radar_coasts
         far2 = self.front.far2
         far: set[int] = set()  # reports beyond the range gate, kept as 2D candidates
         for i, trk, obj, p3, r, d2 in reports:
             zs[i] = p3
             rs[i] = r
             if d2 > gate2:
-                if d2 <= far2 and not (obj.coasting and skip_coasts):
+                if d2 <= far2 and not obj.coasting:
                     # inside the far gate: a horizontal-only candidate (R's horizontal
                     # block; the elevation is too poor out there)
                     far.add(i)
@@ -402,7 +401,7 @@ class Tracker:
                     cands.append((i, trk, obj, obj.score(cfg)))
                     continue
                 out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, p3, trk.track_id)
-            elif obj.coasting and skip_coasts:
+            elif obj.coasting:
                 out[i] = self._step(t, RADAR, DISCARDED, "coast", None, p3, trk.track_id)
             else:
                 cands.append((i, trk, obj, obj.score(cfg)))

@@ -290,8 +290,6 @@ _ASSOCIATION = (
         _s("max", "rf_max", NUMBER, DESIGN, "the support is capped at this", bounds=">= 0"),
         _s("window_s", "rf_window_s", NUMBER, DESIGN, "a fix credits objects with a report "
            "this recent", unit="s", bounds=">= 0"),
-        _s("nearest_only", "rf_nearest_only", BOOL, FITTED, "a fix credits only the object "
-           "it fits best", fit=TUNED),
         _s("support_max_cep_m", "rf_support_max_cep_m", NUMBER, FITTED, "single-UAV tracker: "
            "a fix discarded for its CEP still credits when its CEP is at most this (0: never)",
            unit="m", bounds=">= 0", fit=TUNED),
@@ -310,9 +308,9 @@ _ASSOCIATION = (
            bounds=">= 0", fit=TUNED),
     ),
     *_group("association.age", TRACKER,
-        _s("weight", "age_weight", NUMBER, DESIGN, "weight of the age term", bounds=">= 0"),
-        _s("full_s", "age_full_s", NUMBER, FITTED, "the age term is full from this age",
-           unit="s", bounds=">= 0", fit=TUNED),
+        _s("weight", "age_weight", NUMBER, DESIGN, "weight of the age term, full from an age of "
+           "association.class.tau_s (the time the class history needs to settle)",
+           bounds=">= 0"),
     ),
     *_group("association.object", TRACKER,
         _s("q", "object_q", NUMBER, DESIGN, "process noise of each object's CV filter",
@@ -321,9 +319,6 @@ _ASSOCIATION = (
            "floor would hide erratic motion)", unit="m", bounds=">= 0"),
         _s("speed_tau_s", "speed_tau_s", NUMBER, DESIGN, "time constant of the objects' "
            "moving averages of speed, height and RCS", unit="s", bounds=">= 0"),
-        _s("skip_radar_coasts", "skip_radar_coasts", BOOL, FITTED, "a report repeating its "
-           "radar track's velocity and RCS (a coast) updates neither the track nor the object",
-           fit=TUNED),
     ),
     *_group("association.thresholds", TRACKER,
         _s("follow_min", "follow_min", NUMBER, FITTED, "objects scoring at least this may "
@@ -409,6 +404,10 @@ RETIRED: dict[str, str] = {
     "(gating.range_gate_m)",
     "association.vehicle.min_rcs_dbsm": "a low moving object is a vehicle when its RCS is at "
     "least association.size.large_rcs_dbsm",
+    "association.age.full_s": "the age term is full from an age of association.class.tau_s",
+    "association.rf.nearest_only": "a fix always credits only the object it fits best",
+    "association.object.skip_radar_coasts": "a radar coast (a report repeating its track's "
+    "velocity and RCS) never updates the track or the object",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
 }

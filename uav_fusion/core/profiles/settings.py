@@ -73,14 +73,11 @@ class ScoreConfig:
     lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
     reach_margin_m: float = 0.0  # single-UAV tracker: 0: no reach gate (Tracker._reachable)
     age_weight: float = 0.5
-    age_full_s: float = 10.0
     object_q: float = 5.0
     object_floor_m: float = 10.0
     speed_tau_s: float = 5.0
     follow_min: float = 0.0
     init_min: float = 1.0
     init_min_reports: int = 4
-    skip_radar_coasts: bool = False
-    rf_nearest_only: bool = False
     challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
     challenge_margin: float = 0.5
