@@ -45,8 +45,8 @@ frame, or one RF fix):
   (ours: the summed NIS plus a velocity term) with the missed-detection hypothesis at the gate;
 * ``MultiMeasurementInitiator``: every detection no confirmed track took starts a holding
   track (``SimpleMeasurementInitiator``: measured components and their covariance from the
-  detection and its R, the rest from the prior: velocity 0 with ``init_velocity_std_mps``,
-  altitude ``rf_init_altitude_m`` with ``rf_init_altitude_std_m`` for a 2D fix); at each later
+  detection and its R, the rest from the prior: velocity 0 +- half ``max_speed_mps``,
+  altitude ``rf_init_altitude_m`` +- as much for a 2D fix); at each later
   scan the holding tracks are associated (the same GNN) with the detections the confirmed
   tracks left, and a holding track with ``min_points = confirm_m`` updates (its first
   detection included) becomes a confirmed track. Holding tracks are dropped by

@@ -132,11 +132,11 @@ def test_first_radar_initialises_then_updates(site: Site) -> None:
 
 
 def test_rf_initialisation_uses_altitude_prior(site: Site) -> None:
-    p = _profile(rf_init_altitude_m=55.0, rf_init_altitude_std_m=25.0, tentative_sources=())
+    p = _profile(rf_init_altitude_m=55.0, tentative_sources=())
     s = FusionEstimator(p, site).process(rf(5.0, (10.0, 700.0), 0))[0]
     assert s.status == "initialised" and s.dim == 2
     np.testing.assert_array_equal(s.x[:3], [10.0, 700.0, 55.0])
-    assert s.P[2, 2] == pytest.approx(625.0)
+    assert s.P[2, 2] == pytest.approx(55.0**2)  # as uncertain as it is high
     np.testing.assert_array_equal(s.P[:2, :2], R2)
 
 
@@ -265,7 +265,7 @@ def test_divergence_recovers_within_the_rejection_limit(site: Site) -> None:
         max_consecutive_rejections=n_max,
         max_coast_s=None,
         tentative_sources=(),
-        init_velocity_std_mps=2.0,
+        max_speed_mps=4.0,  # a new track's velocity sigma: 2 m/s
     )
     s = simulate_stream(11, 60.0, (2.0, 2.0, 2.0), R3, R2, velocity_std=5.0)
     ms = [rf(s.measurements[0].t - 0.5, (3000.0, 2500.0), -1), *s.measurements]
@@ -326,15 +326,14 @@ def test_rf_track_is_tentative_until_m_of_n_hits(site: Site) -> None:
 
 
 def test_speed_bound_rejects_agreeing_fixes_too_far_apart(site: Site) -> None:
-    """Inside a wide NIS gate (large initial velocity uncertainty) but faster than the bound:
-    a miss; without the bound the same fix is a hit."""
+    """Inside the NIS gate (coarse fixes) but faster than the bound: a miss; with a bound
+    above the fixes' speed the same fix is a hit."""
     fixes = [rf(0.0, (0.0, 0.0), 0), rf(4.0, (200.0, 0.0), 1)]  # 50 m/s
-    prof = _mofn(init_velocity_std_mps=60.0)
-    steps = run_stream(FusionEstimator(prof, site), fixes)
-    assert steps[1].reason == "speed" and steps[1].nis is not None
-    assert steps[1].nis <= 5.991
-    free = run_stream(FusionEstimator(prof.with_changes(max_speed_mps=None), site), fixes)
-    assert free[1].reason == "hit"
+    wide = np.eye(2) * 2500.0  # 50 m per axis
+    for vmax, reason in ((45.0, "speed"), (55.0, "hit")):
+        steps = run_stream(FusionEstimator(_mofn(max_speed_mps=vmax, r_rf=wide), site), fixes)
+        assert steps[1].reason == reason and steps[1].nis is not None
+        assert steps[1].nis <= 5.991
 
 
 def test_tentative_track_dropped_when_m_is_out_of_reach(site: Site) -> None:

@@ -34,7 +34,7 @@ def _run(
         nis_probability=prob,
         range_gate_m=1e7,
         init_sources=(RADAR,),
-        init_velocity_std_mps=15.0,
+        max_speed_mps=30.0,  # a new track's velocity sigma: 15 m/s
     )
     s = simulate_stream(seed, duration, Q, R_RADAR, R_RF, velocity_std=15.0, **kw)  # type: ignore[arg-type]
     first = next(i for i, m in enumerate(s.measurements) if m.source == RADAR)

@@ -54,12 +54,16 @@ MOVED = {
     "score.age_full_s": "association.class.tau_s (5 s in both)",
     "score.skip_radar_coasts": "always: a coast is the radar's prediction, not a measurement",
     "score.rf_nearest_only": "always: a fix credits the one object it fits best",
+    "init_velocity_std_mps": "half of track.max_speed_mps (15 m/s in all)",
+    "rf_init_altitude_std_m": "track.rf_init_altitude_m (40 m in all)",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}
 # Values refitted since (the tracker's, on the tune halves of the accuracy and worlds
 # benchmarks; docs/estimator.md says with what).
-RETUNED: dict[str, dict[str, Any]] = {"tracker": {"score.class_tau_s": 5.0}}
+RETUNED: dict[str, dict[str, Any]] = {
+    "tracker": {"score.class_tau_s": 5.0, "max_consecutive_rejections": None},
+}
 # Defaults changed since, seen by the profiles that do not set them (the paper's estimator
 # reads no association key).
 DEFAULTS = {"paper": {"score.large_rcs_dbsm": 0.0}}
@@ -309,6 +313,13 @@ def test_with_keys_sets_keys_by_path_and_checks_them() -> None:
         p.with_keys({"association.class.tau_s": -1.0})
     with pytest.raises(ConfigError, match=r"unknown key 'association\.class_tau_s'"):
         p.with_keys({"association.class_tau_s": 5.0})
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_derived_start_priors_keep_their_values(name: str) -> None:
+    then, now = FROZEN[name], load_profile(name)
+    assert now.init_velocity_std_mps == then["init_velocity_std_mps"]
+    assert now.rf_init_altitude_std_m == then["rf_init_altitude_std_m"]
 
 
 def test_merged_keys_keep_the_values_they_replace() -> None:

@@ -420,8 +420,6 @@ class FusionEstimator:
     def _speed_ok(self, m: Measurement, z: list[float]) -> bool:
         """Speed plausibility of a measurement against the tentative track's last hit."""
         vmax = self._max_speed
-        if vmax is None:
-            return True
         t0, e0, n0 = self._last_hit
         dist = math.hypot(z[0] - e0, z[1] - n0)
         dt = m.t - t0

@@ -551,7 +551,7 @@ class Tracker:
         vmax = self.profile.max_speed_mps
         t0, e0, n0 = self._last_hit
         dist = math.hypot(z[0] - e0, z[1] - n0)
-        speed_ok = vmax is None or (dist <= vmax * (t - t0) if t > t0 else dist == 0.0)
+        speed_ok = dist <= vmax * (t - t0) if t > t0 else dist == 0.0
         nis = f.nis(z, r)
         hit = speed_ok and nis <= self._g2
         if hit:

@@ -62,15 +62,13 @@ class Profile:
     use_radar: bool = True
     use_rf: bool = True
     init_sources: tuple[str, ...] = (RADAR, RF)
-    init_velocity_std_mps: float = 15.0
-    rf_init_altitude_m: float = 40.0  # ENU up assumed when an RF fix starts a track
-    rf_init_altitude_std_m: float = 40.0
+    rf_init_altitude_m: float = 40.0  # ENU up (+- as much) when an RF fix starts a track
     max_consecutive_rejections: int | None = None
     max_coast_s: float | None = None
     tentative_sources: tuple[str, ...] = ()
     confirm_m: int = 1  # a tentative track is confirmed by confirm_m hits ...
     confirm_n: int = 1  # ... among its first confirm_n measurements (the start included)
-    max_speed_mps: float | None = None  # speed plausibility bound while tentative
+    max_speed_mps: float = 30.0  # a small UAV's top speed (tentative hits, start velocity)
     # the raw radar row's UAV-track rule (core/data/uav_class.py)
     raw_radar_min_mean_uav_prob: float | None = DEFAULT_MIN_MEAN_UAV_PROB
     description: str = ""
@@ -107,6 +105,18 @@ class Profile:
     # the multi-UAV tracker's own settings (the ``multi`` section; multi_settings.py)
     multi: MultiSettings = field(default_factory=MultiSettings)
     source: Path | None = field(default=None, compare=False)
+
+    @property
+    def init_velocity_std_mps(self) -> float:
+        """A new track's velocity standard deviation per axis: half the top speed, so that
+        the top speed lies at 2 sigma."""
+        return 0.5 * self.max_speed_mps
+
+    @property
+    def rf_init_altitude_std_m(self) -> float:
+        """The standard deviation of a 2D RF start's height: as large as the height itself
+        (the fix says only that the UAV is above the ground)."""
+        return self.rf_init_altitude_m
 
     @property
     def uses_tracker(self) -> bool:

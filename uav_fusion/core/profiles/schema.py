@@ -203,21 +203,19 @@ _TRACK = _group(
     "track", ALL,
     _k("init_sources", "init_sources", SOURCE_LIST, DESIGN, "sources whose measurement may "
        "start a track"),
-    _k("init_velocity_std_mps", "init_velocity_std_mps", NUMBER, PHYSICAL, "velocity "
-       "standard deviation of a new track, per axis", unit="m/s", bounds="> 0"),
     _k("rf_init_altitude_m", "rf_init_altitude_m", NUMBER, PHYSICAL, "ENU up given to a track "
-       "started from a 2D RF fix", unit="m"),
-    _k("rf_init_altitude_std_m", "rf_init_altitude_std_m", NUMBER, PHYSICAL, "its standard "
-       "deviation", unit="m", bounds="> 0"),
+       "started from a 2D RF fix, with a standard deviation as large (a 2D fix says only "
+       "that the UAV is above the ground)", unit="m", bounds="> 0"),
     _k("tentative_sources", "tentative_sources", SOURCE_LIST, DESIGN, "sources whose tracks "
        "start tentative (not published) until confirm_m of confirm_n hits", null="none"),
     _k("confirm_m", "confirm_m", INTEGER, DESIGN, "hits that confirm a tentative track ...",
        bounds=">= 1"),
     _k("confirm_n", "confirm_n", INTEGER, DESIGN, "... among its first confirm_n "
        "measurements (the start included); needs confirm_m <= confirm_n", bounds=">= 1"),
-    _k("max_speed_mps", "max_speed_mps", NUMBER, PHYSICAL, "a hit of a tentative track lies "
-       "at most this far from the last hit per second (a small UAV's top speed)",
-       unit="m/s", bounds="> 0", null="no bound"),
+    _k("max_speed_mps", "max_speed_mps", NUMBER, PHYSICAL, "a small UAV's top speed: a hit of "
+       "a tentative track lies at most this far from the last hit per second, and a new "
+       "track's velocity has a standard deviation of half of it per axis (2 sigma: the top "
+       "speed)", unit="m/s", bounds="> 0"),
     _k("max_consecutive_rejections", "max_consecutive_rejections", INTEGER, DESIGN, "the track "
        "restarts after this many NIS rejections in a row", bounds=">= 1", null="never"),
     _k("max_coast_s", "max_coast_s", NUMBER, DESIGN, "the track restarts when nothing was "
@@ -408,6 +406,10 @@ RETIRED: dict[str, str] = {
     "association.rf.nearest_only": "a fix always credits only the object it fits best",
     "association.object.skip_radar_coasts": "a radar coast (a report repeating its track's "
     "velocity and RCS) never updates the track or the object",
+    "track.init_velocity_std_mps": "a new track's velocity standard deviation is half of "
+    "track.max_speed_mps",
+    "track.rf_init_altitude_std_m": "the RF start's height standard deviation is "
+    "track.rf_init_altitude_m",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
 }
