@@ -658,7 +658,7 @@ def test_the_profiles_multi_section_sets_the_tracker(site: Site, tmp_path: Path)
         ({"emitter_doubt": 1.5}, r"multi.emitter_doubt must be a number in \[0, 1\]"),
         ({"emitter_misses": 0}, "multi.emitter_misses must be an integer >= 1 or null"),
         ({"emitter_misses": 2.5}, "multi.emitter_misses must be an integer"),
-        ({"merge_keeps_live": "yes"}, "multi.merge_keeps_live must be true or false, got 'yes'"),
+        ({"merge_keeps_live": True}, "'multi.merge_keeps_live' is no longer a key: always"),
         ({"velocity_sigma_mps": None}, "multi.velocity_sigma_mps must be a number > 0, got None"),
         ({"output_coast_s": float("nan")}, "multi.output_coast_s must be a number >= 0 or null"),
         ({"birth_gap_s": 3.0}, "unknown key 'multi.birth_gap_s'"),
@@ -678,7 +678,7 @@ def test_a_bad_multi_key_stops_naming_the_file_and_key(
 
 def test_a_profile_round_trips_its_multi_section() -> None:
     p = load_profile("tracker")
-    changed = dataclasses.replace(p.multi, merge_s=5.0, emitter_misses=None, merge_keeps_live=False)
+    changed = dataclasses.replace(p.multi, merge_s=5.0, emitter_misses=None, early_birth_age_s=None)
     doc = dataclasses.replace(p, multi=changed).as_dict()
     assert profile_from_dict(doc).multi == changed
     assert "multi" not in load_profile("paper").as_dict()  # the paper's profile as it was

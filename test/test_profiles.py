@@ -56,6 +56,11 @@ MOVED = {
     "score.rf_nearest_only": "always: a fix credits the one object it fits best",
     "init_velocity_std_mps": "half of track.max_speed_mps (15 m/s in all)",
     "rf_init_altitude_std_m": "track.rf_init_altitude_m (40 m in all)",
+    "multi.birth_age_s": "association.stationary.min_age_s (null: that, in all)",
+    "multi.continuity_bonus": "gone (0 in all: off)",
+    "multi.merge_keeps_live": "always (true in all)",
+    "multi.flat_below_ground": "always (true in all)",
+    "multi.tentative_takes_radar": "never (false in all)",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}
@@ -330,3 +335,6 @@ def test_merged_keys_keep_the_values_they_replace() -> None:
     assert then["score"]["vehicle_min_rcs_dbsm"] == now.score.large_rcs_dbsm
     assert RETUNED["tracker"]["score.class_tau_s"] == then["score"]["age_full_s"]
     assert then["score"]["skip_radar_coasts"] and then["score"]["rf_nearest_only"]
+    m = then["multi"]
+    assert (m["birth_age_s"], m["continuity_bonus"], m["tentative_takes_radar"]) == (None, 0, False)
+    assert m["merge_keeps_live"] and m["flat_below_ground"]

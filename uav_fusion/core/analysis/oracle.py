@@ -144,7 +144,7 @@ class LabelOracle(MultiTracker):
             e, n_, u = p3
             z: tuple[float, ...] = p3
             far = d2 > front.gate2
-            if far or (self.settings.flat_below_ground and u < -cfg.below_ground_m):
+            if far or u < -cfg.below_ground_m:
                 z, r = (e, n_), (r[0], r[1], r[3])
             mine.setdefault(vehicle, []).append((obj, r, z, far))
         self._advance(t)

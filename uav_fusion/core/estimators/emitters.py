@@ -65,9 +65,7 @@ class Emitters:
         if obj is not None and any(tr.confirmed and tr.followed == obj.id for tr in own):
             # the fix and the radar object its emitter's track follows agree: registration
             mt.front.register(t, att.e, att.n, var, obj)
-        tentative_only = not mt.settings.tentative_takes_radar and all(
-            not tr.confirmed for tr in own
-        )
+        tentative_only = all(not tr.confirmed for tr in own)
         if own and not tentative_only:
             tr = min(own, key=lambda x: (not x.confirmed, x.id))
             self.update(tr, t, z, r, att.cep)

@@ -10,21 +10,22 @@ Its own settings are the profile's ``multi`` section (``config/profiles/README.m
 Per radar frame (one time for all reports):
 
 1. every finite report updates its radar object; the candidates are the reports inside the
-   range gate (horizontal only between it and the far gate, or below the ground with
-   ``flat_below_ground``), not coasting, of objects scoring at least ``follow_min`` (or at
+   range gate (horizontal only between it and the far gate, or below the ground), not
+   coasting, of objects scoring at least ``follow_min`` (or at
    least ``emitter_follow_min`` for the track carrying the emitter whose fix last credited
    the object: a young radar track on an emitting UAV);
 2. every track is predicted to the frame's time (the deleter drops a track whose last
    accepted measurement is older than ``max_coast_s``);
 3. tracks and candidates are assigned one to one (Hungarian assignment on the position NIS
    plus ``velocity_weight`` times the NIS of the radar's reported velocity against the
-   track's, less ``continuity_bonus`` for the radar object the track took last; pairs
+   track's; pairs
    outside the NIS gate forbidden; the UAV score is not in the cost: it tells a UAV from
    clutter, not one UAV from another); an assigned report updates its track (robust
    weight); a confirmed track whose own radar object reported outside its gate counts a
    rejection;
 4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
-   ``init_min_reports`` reports), old enough (``birth_age_s``, or ``early_birth_age_s`` while
+   ``init_min_reports`` reports), old enough (the score's ``stationary_min_age_s``, or
+   ``early_birth_age_s`` while
    it moves at ``early_birth_speed_mps``, or with RF support) and outside every track's gate
    starts a confirmed track from its object's state (at the RF start's height prior when it
    has no usable height; never from a ghost below the ground);
@@ -86,7 +87,7 @@ FloatArray = npt.NDArray[np.float64]
 
 _FORBIDDEN = 1.0e9
 # a radar report that may update a track: the report, its object, the object's UAV score, R
-# and the measurement (e, n, u; or e, n for a report below the ground: ``flat_below_ground``)
+# and the measurement (e, n, u; or e, n for a report below the ground)
 _Cand = tuple[RadarTrack, RadarObject, float, PackedR, tuple[float, ...]]
 
 
@@ -310,8 +311,7 @@ class MultiTracker:
         t = frame.t
         cands, far_cands, weak = self._candidates(frame)
         self._advance(t)
-        take_tentative = self.settings.tentative_takes_radar
-        live = [tr for tr in self.tracks if tr.t <= t and (tr.confirmed or take_tentative)]
+        live = [tr for tr in self.tracks if tr.t <= t and tr.confirmed]
         g2 = self._g2
         g3 = self._g3
         nis_rows: list[list[float]] = []
@@ -346,7 +346,6 @@ class MultiTracker:
         far_cands: set[int] = set()
         weak: set[int] = set()
         efm = self.settings.emitter_follow_min
-        flat = self.settings.flat_below_ground
         if frame.tracks:
             self._count("radar_reports", len(frame.tracks))
         bad, reports = self.front.reports(frame)
@@ -363,7 +362,7 @@ class MultiTracker:
             if d2 > gate2:
                 # inside the far gate: horizontal only
                 z, r = (e, n_), (r[0], r[1], r[3])
-            elif flat and u < -cfg.below_ground_m:
+            elif u < -cfg.below_ground_m:
                 # the elevation of a low target is the radar's weak point (ground multipath):
                 # range and azimuth still place it; its object without the below-ground term
                 if obj.below_ground(cfg):
@@ -398,10 +397,9 @@ class MultiTracker:
         g2 = self._g2
         g3 = self._g3
         took: dict[int, int] = {}
-        # NIS, less a bonus for the object the track followed last; the UAV score only
-        # decides who may update a track (follow_min): between two UAVs it says nothing
+        # NIS (and the reported velocity's); the UAV score only decides who may update a
+        # track (follow_min): between two UAVs it says nothing
         st = self.settings
-        bonus = st.continuity_bonus
         wv = st.velocity_weight
         s2 = st.velocity_sigma_mps**2
         cost_rows: list[list[float]] = []
@@ -414,7 +412,7 @@ class MultiTracker:
                     crow.append(_FORBIDDEN)
                     continue
                 any_inside = True
-                v = n - bonus * (c[0].track_id == tr.followed)
+                v = n
                 if wv > 0.0:
                     v += wv * velocity_nis(x, pk, c[0].vel_ned, s2)
                 crow.append(v)
@@ -481,14 +479,13 @@ class MultiTracker:
             tr.score = s
 
     def _old_enough(self, obj: RadarObject, t: float) -> bool:
-        """Whether a strong object has been seen long enough to start a track: for
-        ``birth_age_s`` (default the score's ``stationary_min_age_s``), or for
+        """Whether a strong object has been seen long enough to start a track: for the
+        score's ``stationary_min_age_s`` (by then clutter has shown that it stands still), or for
         ``early_birth_age_s`` while its mean speed is at least ``early_birth_speed_mps``, or
         at any age with RF support."""
         st = self.settings
-        birth_age = self.cfg.stationary_min_age_s if st.birth_age_s is None else st.birth_age_s
         age = obj.age_s
-        if age >= birth_age or obj.rf_support_at(t, self.cfg.rf_tau_s) > 0.0:
+        if age >= self.cfg.stationary_min_age_s or obj.rf_support_at(t, self.cfg.rf_tau_s) > 0.0:
             return True
         early = st.early_birth_age_s
         return early is not None and age >= early and obj.speed >= st.early_birth_speed_mps
@@ -549,18 +546,17 @@ class MultiTracker:
                     and a.followed != b.followed
                 ):
                     continue  # two objects side by side: two UAVs
-                # keep the older track; it inherits the younger one's emitter. With
-                # merge_keeps_live, a track updated within merge_s is kept over one that is
-                # not (a coasting track that lost its UAV drifting onto another UAV's track),
-                # and a coasting track's emitter is not inherited.
+                # keep the older track; it inherits the younger one's emitter. A track
+                # updated within merge_s is kept over one that is not (a coasting track that
+                # lost its UAV drifting onto another UAV's track), and a coasting track's
+                # emitter is not inherited.
                 keep, lose = (a, b) if (a.born_t, a.id) <= (b.born_t, b.id) else (b, a)
-                if st.merge_keeps_live:
-                    la = t - a.last_update_t <= st.merge_s
-                    lb = t - b.last_update_t <= st.merge_s
-                    if la != lb:
-                        keep, lose = (a, b) if la else (b, a)
-                    if t - lose.last_update_t > st.merge_s:
-                        lose.emitter = None
+                la = t - a.last_update_t <= st.merge_s
+                lb = t - b.last_update_t <= st.merge_s
+                if la != lb:
+                    keep, lose = (a, b) if la else (b, a)
+                if t - lose.last_update_t > st.merge_s:
+                    lose.emitter = None
                 if keep.emitter is None:
                     keep.emitter = lose.emitter
                 self._drop(lose, "merged")

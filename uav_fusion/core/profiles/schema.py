@@ -342,28 +342,21 @@ _MULTI = _group(
        bounds="> 0"),
     _m("merge_s", NUMBER, FITTED, "... for this long are one UAV (unless updated by different "
        "radar objects)", unit="s", bounds=">= 0", fit=TUNED),
-    _m("merge_keeps_live", BOOL, DESIGN, "a merge keeps the recently updated track"),
     _m("emitter_doubt", NUMBER, DESIGN, "a track with an emitter: 1 - P(UAV) is multiplied by "
        "this", bounds="[0, 1]"),
     _m("velocity_weight", NUMBER, DESIGN, "weight of the reported velocity's NIS in the "
        "assignment cost", bounds=">= 0"),
     _m("velocity_sigma_mps", NUMBER, DESIGN, "error of a radar track's reported velocity, per "
        "axis", unit="m/s", bounds="> 0"),
-    _m("continuity_bonus", NUMBER, DESIGN, "NIS credit for the radar object a track took last",
-       bounds=">= 0"),
-    _m("birth_age_s", NUMBER, DESIGN, "an object scoring association.thresholds.init_min "
-       "starts a track from this age", unit="s", bounds=">= 0",
-       null="association.stationary.min_age_s"),
-    _m("early_birth_age_s", NUMBER, FITTED, "... or from this age when moving at "
-       "early_birth_speed_mps", unit="s", bounds=">= 0", null="only from birth_age_s",
+    _m("early_birth_age_s", NUMBER, FITTED, "a strong object starts a track from the age "
+       "association.stationary.min_age_s, or from this age when moving at "
+       "early_birth_speed_mps", unit="s", bounds=">= 0", null="only from that age",
        fit=TUNED),
     _m("early_birth_speed_mps", NUMBER, DESIGN, "the mean speed of an early birth",
        unit="m/s", bounds=">= 0"),
     _m("birth_sep_m", NUMBER, DESIGN, "a strong object in a track's gate starts its own track "
        "when the track took a report this far away in the same frame", unit="m",
        bounds=">= 0", null="never"),
-    _m("flat_below_ground", BOOL, DESIGN, "a report below association.ghost.below_ground_m "
-       "updates east and north only"),
     _m("output_coast_s", NUMBER, FITTED, "a confirmed track is published while its last "
        "update is this recent and, inside radar cover, its last radar update too (an emitter "
        "there that the radar does not see is on the ground)", unit="s", bounds=">= 0",
@@ -372,7 +365,6 @@ _MULTI = _group(
        "track's gate unlink the emitter", bounds=">= 1", null="never"),
     _m("emitter_follow_min", NUMBER, DESIGN, "an object scoring this (below follow_min) that "
        "its emitter's fixes credit may update the track carrying that emitter", null="off"),
-    _m("tentative_takes_radar", BOOL, DESIGN, "a tentative (RF) track may take radar reports"),
 )
 _SMOOTHER = (
     _k("smoother.lag_s", "smoother_lag_s", NUMBER, DESIGN, "fixed-lag smoothing: each estimate "
@@ -410,6 +402,12 @@ RETIRED: dict[str, str] = {
     "track.max_speed_mps",
     "track.rf_init_altitude_std_m": "the RF start's height standard deviation is "
     "track.rf_init_altitude_m",
+    "multi.birth_age_s": "a strong object starts a track once older than "
+    "association.stationary.min_age_s",
+    "multi.continuity_bonus": "gone: the assignment cost is the NIS and the velocity's NIS",
+    "multi.merge_keeps_live": "always: a merge keeps the recently updated track",
+    "multi.flat_below_ground": "always: a report below the ground updates east and north only",
+    "multi.tentative_takes_radar": "never: a tentative (RF) track takes no radar report",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
 }

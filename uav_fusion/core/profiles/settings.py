@@ -20,17 +20,12 @@ class MultiSettings:
     merge_nis: float = 3.0  # two tracks this close (NIS, 3 dof) are candidates for a merge
     merge_s: float = 3.0  # ... and are merged after this long
     emitter_doubt: float = 0.1  # 1 - P(UAV) is multiplied by this for a track with an emitter
-    birth_age_s: float | None = None  # None: the score's stationary_min_age_s
-    continuity_bonus: float = 0.0  # NIS credit for the radar object a track took last
     velocity_weight: float = 1.0  # weight of the reported-velocity NIS in the cost
     velocity_sigma_mps: float = 3.0  # error of a radar track's reported velocity, per axis
     output_coast_s: float | None = 3.0  # published while the last update is this recent
     # and, inside radar cover, the last radar update too (None: while it lives)
     emitter_misses: int | None = 3  # this many fixes of its emitter in a row outside a
     # track's gate unlink the emitter from it (None: never)
-    tentative_takes_radar: bool = False  # a tentative (RF) track may take radar reports
-    merge_keeps_live: bool = True  # a merge keeps the recently updated track over the older
-    flat_below_ground: bool = True  # a report below the ground updates east / north only
     birth_sep_m: float | None = 60.0  # a strong object inside a track's gate starts a track
     # when that track took another report of the frame this far away (None: never)
     early_birth_age_s: float | None = 4.0  # an object moving at early_birth_speed_mps or
