@@ -691,15 +691,18 @@ def test_an_emitting_uav_is_followed_where_its_fixes_put_a_radar_track_still_cla
     cover), then a radar track takes it up whose class probability stays at 0.28. After the
     emitter's first fix credits that radar track its score lies between 0 and ``follow_min``:
     the track carrying the emitter takes its reports then (``emitter_follow_min``), not 4 s
-    later after the next fix. (The emitter's fixes before the radar track appeared are not
-    kept for it here, ``rf_memory_s`` 0, so that its support starts with that first fix.)"""
+    later after the next fix. (The emitter's two fixes just before the radar track appeared
+    are lost here, so that no fix kept for a new object reaches it and its support starts
+    with that first fix.)"""
     path = _flight(np.array([-200.0, 300.0, 0.0]), 5.0, np.array([8.0, 0.0, 0.0]))
     uav = Uav(path, 10, seen=lambda tau: tau >= 30.0, freq_hz=FREQ_A, uav_prob=0.28)
     prof = load_profile("tracker")
-    prof = prof.with_changes(score=dataclasses.replace(prof.score, rf_memory_s=0.0))
     first = {}
     for seed in (1, 2, 3):
-        stream = scene_stream(site, [uav], 70.0, seed)
+        stream = [
+            it for it in scene_stream(site, [uav], 70.0, seed)
+            if not (isinstance(it, RfAttempt) and 1024.0 <= it.t < 1030.0)
+        ]
         for efm in (0.0, None):
             tracker = MultiTracker(prof, site, MultiSettings(emitter_follow_min=efm))
             epochs = run_multi(tracker, stream, 1.0, 1000.0, 1069.0)

@@ -61,13 +61,17 @@ MOVED = {
     "multi.merge_keeps_live": "always (true in all)",
     "multi.flat_below_ground": "always (true in all)",
     "multi.tentative_takes_radar": "never (false in all)",
+    "score.rf_memory_s": "association.rf.tau_s (15 s for the tracker, 30 s before)",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}
 # Values refitted since (the tracker's, on the tune halves of the accuracy and worlds
 # benchmarks; docs/estimator.md says with what).
 RETUNED: dict[str, dict[str, Any]] = {
-    "tracker": {"score.class_tau_s": 5.0, "max_consecutive_rejections": None},
+    "tracker": {
+        "score.class_tau_s": 5.0,
+        "max_consecutive_rejections": None,
+    },
 }
 # Defaults changed since, seen by the profiles that do not set them (the paper's estimator
 # reads no association key).
@@ -201,14 +205,14 @@ def test_extends_merges_mappings_and_replaces_lists_and_values(tmp_path: Path) -
         "extends": "base.yaml",  # a path: relative to this file
         "track": {"tentative_sources": None, "max_consecutive_rejections": None},
         "multi": {"emitter_misses": None},
-        "association": {"rf": {"memory_s": 10.0}},
+        "association": {"rf": {"window_s": 10.0}},
     })
     tracker, p = load_profile("tracker"), load_profile(child)
     assert p.name == "child"  # the name is the file's own
     assert p.init_sources == ("radar",) and p.max_coast_s == 30.0  # from base, two deep
     assert p.tentative_sources == () and p.max_consecutive_rejections is None  # null sets null
     assert p.multi.emitter_misses is None and p.multi.merge_s == tracker.multi.merge_s
-    assert (p.score.rf_tau_s, p.score.rf_memory_s) == (20.0, 10.0)  # merged key by key
+    assert (p.score.rf_tau_s, p.score.rf_window_s) == (20.0, 10.0)  # merged key by key
     assert p.score.follow_min == tracker.score.follow_min and p.estimator == "tracker"
     assert profile_files(child) == (child, base, config_path("profiles/tracker.yaml"))
 

@@ -1012,14 +1012,14 @@ def test_a_low_moving_object_is_a_ground_vehicle_only_if_it_is_large(
     assert obj.score(cfg) == pytest.approx(obj.score(no_ground) - (3.0 if vehicle else 0.0))
 
 
-@pytest.mark.parametrize("memory_s", [0.0, 30.0])
+@pytest.mark.parametrize("tau_s", [5.0, 15.0])
 def test_an_emitter_the_radar_does_not_see_yet_supports_the_object_that_appears_there(
-    memory_s: float,
+    tau_s: float,
 ) -> None:
     """Fixes that credit no object (a UAV on its pad, link on, no radar track) are kept for
-    ``rf_memory_s``; the first object that appears inside their gate takes their support,
+    ``rf_tau_s``; the first object that appears inside their gate takes their support,
     decayed since; an object elsewhere, a fix too old or an object seen before get none."""
-    cfg = dataclasses.replace(ScoreConfig(), rf_memory_s=memory_s, rf_tau_s=15.0)
+    cfg = dataclasses.replace(ScoreConfig(), rf_tau_s=tau_s)
     table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
 
     def report(t: float, tid: int, east: float) -> RadarTrack:
@@ -1033,7 +1033,7 @@ def test_an_emitter_the_radar_does_not_see_yet_supports_the_object_that_appears_
     far = table.update(report(60.0, 2, 900.0))  # a new object, but not where the fixes are
     assert far.rf_support == 0.0
     obj = table.update(report(60.0, 1, 500.0))  # appears at the emitter
-    if memory_s:
+    if tau_s > 10.0:  # the fixes 10 and 6 s old are kept; at 5 s neither is
         want = math.exp(-10.0 / 15.0) + math.exp(-6.0 / 15.0)
         assert obj.rf_support == pytest.approx(want) and obj.rf_t == 60.0
         # used up: the next object there gets nothing

@@ -35,7 +35,7 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   coarse to update a track (CEP above the profile's ``measurement.rf.max_cep_m``) still
   counts here when its CEP is at most ``rf_support_max_cep_m`` (0: never; single-UAV
   tracker only); a fix that credits no object at all (an emitter the radar does not see
-  yet: a UAV on its pad with its link on) is kept for ``rf_memory_s`` (0: not kept), and an
+  yet: a UAV on its pad with its link on) is kept for ``rf_tau_s`` (0: not kept), and an
   object seen for the first time takes the support of the kept fixes inside its gate, as
   if it had been credited when each was made (decayed since). A fix given with its emitter's
   key (the multi-UAV tracker) leaves that key on the objects it credits
@@ -383,8 +383,8 @@ class ObjectTable:
             obj.rf_t = t
             obj.rf_key = key
             hits += 1
-        if hits == 0 and cfg.rf_memory_s > 0:
-            keep = t - cfg.rf_memory_s
+        if hits == 0 and cfg.rf_tau_s > 0:
+            keep = t - cfg.rf_tau_s
             self._orphans = [o for o in self._orphans if o[0] >= keep]
             self._orphans.append((t, e, n, var_m2, key))
         return hits
@@ -393,7 +393,7 @@ class ObjectTable:
         """Give a new object the support of the kept fixes that credited nobody and fall
         inside its gate (first report ``e``, ``n`` with R ``r``); those fixes are used up."""
         cfg = self.cfg
-        keep = t - cfg.rf_memory_s
+        keep = t - cfg.rf_tau_s
         left: list[tuple[float, float, float, float, str | None]] = []
         sup = 0.0
         key: str | None = None

@@ -283,16 +283,15 @@ _ASSOCIATION = (
     *_group("association.rf", TRACKER,
         _s("weight", "rf_weight", NUMBER, DESIGN, "weight of the RF support (fixes inside the "
            "object's 99 % gate)", bounds=">= 0"),
-        _s("tau_s", "rf_tau_s", NUMBER, FITTED, "the support decays with this time constant",
-           unit="s", bounds=">= 0", fit=TUNED),
+        _s("tau_s", "rf_tau_s", NUMBER, DESIGN, "the support decays with this time constant, "
+           "and a fix that credits no object is kept this long for a new object in its gate "
+           "(a UAV on its pad before the radar has a track on it)", unit="s", bounds=">= 0"),
         _s("max", "rf_max", NUMBER, DESIGN, "the support is capped at this", bounds=">= 0"),
         _s("window_s", "rf_window_s", NUMBER, DESIGN, "a fix credits objects with a report "
            "this recent", unit="s", bounds=">= 0"),
         _s("support_max_cep_m", "rf_support_max_cep_m", NUMBER, FITTED, "single-UAV tracker: "
            "a fix discarded for its CEP still credits when its CEP is at most this (0: never)",
            unit="m", bounds=">= 0", fit=TUNED),
-        _s("memory_s", "rf_memory_s", NUMBER, DESIGN, "a fix that credits no object is kept "
-           "this long for a new object in its gate (0: not kept)", unit="s", bounds=">= 0"),
     ),
     *_group("association.fused", TRACKER,
         _s("weight", "fused_weight", NUMBER, DESIGN, "weight of the agreement with the fused "
@@ -408,6 +407,7 @@ RETIRED: dict[str, str] = {
     "multi.merge_keeps_live": "always: a merge keeps the recently updated track",
     "multi.flat_below_ground": "always: a report below the ground updates east and north only",
     "multi.tentative_takes_radar": "never: a tentative (RF) track takes no radar report",
+    "association.rf.memory_s": "a fix that credits no object is kept for association.rf.tau_s",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
 }

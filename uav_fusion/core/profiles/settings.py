@@ -61,7 +61,6 @@ class ScoreConfig:
     rf_max: float = 3.0
     rf_window_s: float = 3.0
     rf_support_max_cep_m: float = 0.0
-    rf_memory_s: float = 0.0
     fused_weight: float = 1.5
     fused_tau_s: float = 10.0
     fused_nis: float = 3.0
