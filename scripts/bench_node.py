@@ -138,7 +138,11 @@ class Feed:
 def build_feed(profile: str) -> Feed:
     from uav_fusion.core.data import load_flight
     from uav_fusion.core.estimators import load_profile, run_flight
-    from uav_fusion.core.estimators.selection import radar_profile, selected_radar
+    from uav_fusion.core.estimators.selection import (
+        pose_covariance,
+        radar_profile,
+        selected_radar,
+    )
     from uav_fusion.core.site import load_site
     from uav_fusion.resources import DEFAULT_FLIGHT, data_path
     from uav_fusion.ros import conversions as cv
@@ -146,11 +150,12 @@ def build_feed(profile: str) -> Feed:
     site = load_site()
     flight = load_flight(data_path(DEFAULT_FLIGHT), site)
     prof = radar_profile(profile)
+    cov = pose_covariance(prof, site)
     items: list[tuple[float, int, str, Any]] = []
     for frame in selected_radar(flight, prof, site):
         for m in frame:
             items.append((m.t, len(items), "radar/pose",
-                          cv.radar_measurement_to_msg(m, site.frame_id, prof.r_radar)))
+                          cv.radar_measurement_to_msg(m, site.frame_id, cov(*m.z))))
     for a in flight.rf:
         items.append((a.t, len(items), "rf/fix", cv.rf_attempt_to_msg(a, site.frame_id)))
     items.sort(key=lambda it: (it[0], it[1]))

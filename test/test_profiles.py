@@ -71,6 +71,10 @@ RETUNED: dict[str, dict[str, Any]] = {
     "tracker": {
         "score.class_tau_s": 5.0,
         "max_consecutive_rejections": None,
+        # the fitted fallback matrices went: the polar model gives every report its R, and a
+        # fix without a CEP counts as max_cep_m
+        "r_radar": None,
+        "r_rf": None,
     },
 }
 # Defaults changed since, seen by the profiles that do not set them (the paper's estimator

@@ -143,6 +143,24 @@ def test_cep_r_hand_cases() -> None:
     assert m.r_for(float("nan")) == (9.0, 0.0, 9.0)
 
 
+def test_a_fix_without_a_cep_counts_as_the_coarsest_that_updates() -> None:
+    """The tracker's profile has no fixed RF R: a fix without a CEP gets the R of a fix at
+    ``max_cep_m``; without either the profile stops, naming the key."""
+    from uav_fusion.core.errors import ConfigError
+    from uav_fusion.core.estimators import load_profile
+    from uav_fusion.core.estimators.parts import rf_model_from_profile
+
+    p = load_profile("tracker")
+    assert p.r_rf is None and p.rf_max_cep_m is not None
+    m = rf_model_from_profile(p)
+    assert m.r_for(None) == pytest.approx(m.r_for(p.rf_max_cep_m))
+    assert m.r_for(None) != m.r_for(p.rf_max_cep_m - 1.0)
+    with pytest.raises(ConfigError, match=r"measurement\.rf\.R is needed"):
+        p.with_changes(rf_max_cep_m=None)
+    with pytest.raises(ConfigError, match=r"measurement\.radar\.R is needed"):
+        p.with_changes(radar_model="fixed")
+
+
 # --- robust weights -------------------------------------------------------------------------
 def test_student_t_weight_hand_cases() -> None:
     w = StudentTWeight(dof=4.0)

@@ -21,8 +21,9 @@ Topic names sit under an optional namespace. Every message is stored at its sens
 :mod:`uav_fusion.ros.conversions`) and the selection is :mod:`uav_fusion.core.estimators.selection`
 (shared with ``radar_replay``); serialization is rosbags' CDR, whose bytes equal those of a
 live rclpy publisher except alignment padding, which rosbags writes as zeros and rclpy leaves
-as whatever was in memory (tested). No rclpy is needed. The profile's name and radar R are
-stored in ``metadata.yaml``'s ``custom_data``.
+as whatever was in memory (tested). No rclpy is needed. The profile's name and radar R
+(``polar`` for a tracker profile: each report's own) are stored in ``metadata.yaml``'s
+``custom_data``.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from uav_fusion.core.data import encoding as enc
 from uav_fusion.core.data.clouds import Cloud, radar_frame_to_cloud, rf_attempts_to_cloud
 from uav_fusion.core.data.encoding import time_to_ns
 from uav_fusion.core.estimators.selection import (
+    pose_covariance,
     radar_profile,
     raw_radar_reports,
     report_covariance,
@@ -77,7 +79,9 @@ class ConvertResult:
 
     bag: WrittenBag
     topics: dict[str, str]  # leaf name -> full topic name
-    radar_cov: FloatArray  # the radar R written into the pose covariances (3x3, m^2)
+    # the radar R written into the pose covariances (3x3, m^2); None: each report's own (the
+    # profile's polar model)
+    radar_cov: FloatArray | None
     profile: str
 
 
@@ -104,7 +108,8 @@ def convert_flight(
     selection); ``track_selection`` overrides the selection ("profile": the profile's own).
     """
     prof = radar_profile(profile, track_selection)
-    R = np.asarray(prof.r_radar, dtype=float)
+    R = pose_covariance(prof, site)
+    fixed = None if prof.r_radar is None else np.asarray(prof.r_radar, dtype=float)
     frame = site.frame_id
     names = {leaf: topic_name(namespace, leaf) for leaf in TYPES}
     ts = jazzy_typestore()
@@ -113,11 +118,11 @@ def convert_flight(
     items: list[tuple[float, int, str, Any]] = []
     for group in selected_radar(flight, prof, site):
         for m in group:
-            mR = m.R if m.R is not None else R
+            mR = m.R if m.R is not None else R(*m.z)
             items.append((m.t, len(items), RADAR_POSE, msgs.radar_pose(m.t, m.z, mR, frame)))
     for trk in raw_radar_reports(flight, prof):
         pos = (trk.e, trk.n, trk.u)
-        items.append((trk.t, len(items), RADAR_RAW, msgs.radar_pose(trk.t, pos, R, frame)))
+        items.append((trk.t, len(items), RADAR_RAW, msgs.radar_pose(trk.t, pos, R(*pos), frame)))
     cov = report_covariance(prof, site)
     for fr in flight.radar:
         items.append((fr.t, len(items), RADAR_TRACKS,
@@ -140,13 +145,15 @@ def convert_flight(
         writer.abort()
         raise
     if progress is not None:
-        progress(f"profile {prof.name}: radar selection {prof.radar_selection}, "
-                 f"radar R diag {np.diag(R).tolist()} m^2")
-    _store_custom(written.path, R, prof.name, prof.radar_selection, flight.name)
-    return ConvertResult(written, names, R, prof.name)
+        what = "polar, per report" if fixed is None else f"diag {np.diag(fixed).tolist()} m^2"
+        progress(f"profile {prof.name}: radar selection {prof.radar_selection}, radar R {what}")
+    _store_custom(written.path, fixed, prof.name, prof.radar_selection, flight.name)
+    return ConvertResult(written, names, fixed, prof.name)
 
 
-def _store_custom(path: Path, R: FloatArray, profile: str, selection: str, name: str) -> None:
+def _store_custom(
+    path: Path, R: FloatArray | None, profile: str, selection: str, name: str
+) -> None:
     """Record the conversion settings in metadata.yaml's custom_data."""
     import yaml
 
@@ -154,7 +161,9 @@ def _store_custom(path: Path, R: FloatArray, profile: str, selection: str, name:
     doc = yaml.safe_load(meta_path.read_text(encoding="utf-8"))
     doc["rosbag2_bagfile_information"]["custom_data"] = {
         "uav_fusion.flight": name,
-        "uav_fusion.radar_R": " ".join(f"{v:.6g}" for v in np.asarray(R).reshape(-1)),
+        "uav_fusion.radar_R": (
+            "polar" if R is None else " ".join(f"{v:.6g}" for v in np.asarray(R).reshape(-1))
+        ),
         "uav_fusion.profile": profile,
         "uav_fusion.radar_selection": selection,
     }

@@ -31,6 +31,7 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.core.estimators.selection import (
+    pose_covariance,
     radar_profile,
     raw_radar_reports,
     report_covariance,
@@ -87,9 +88,9 @@ class RadarReplay(ReplayNode):
         return [(self.pub, self.pub_tracks)] if self.pub_tracks is not None else []
 
     def streams(self) -> list[tuple[Publisher, list[tuple[float, Any]]]]:
-        R = self.profile.r_radar
+        R = pose_covariance(self.profile, self.site)
         sel = [
-            (m.t, cv.radar_measurement_to_msg(m, self.frame_id, R))
+            (m.t, cv.radar_measurement_to_msg(m, self.frame_id, R(*m.z)))
             for frame in selected_radar(self.flight, self.profile, self.site)
             for m in frame
         ]
@@ -98,7 +99,7 @@ class RadarReplay(ReplayNode):
             out.append((self.pub, sel))
         if self.pub_raw is not None:
             raw = [
-                (trk.t, cv.radar_track_to_msg(trk, R, self.frame_id))
+                (trk.t, cv.radar_track_to_msg(trk, R(trk.e, trk.n, trk.u), self.frame_id))
                 for trk in raw_radar_reports(self.flight, self.profile)
             ]
             out.append((self.pub_raw, raw))

@@ -30,7 +30,11 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import PointCloud2
 
 from uav_fusion.core.data.uav_class import RunningUavClass
-from uav_fusion.core.estimators.selection import radar_profile, report_covariance
+from uav_fusion.core.estimators.selection import (
+    pose_covariance,
+    radar_profile,
+    report_covariance,
+)
 from uav_fusion.core.ingest.decode import Record
 from uav_fusion.core.records import RadarFrame
 from uav_fusion.ros import conversions as cv
@@ -61,7 +65,7 @@ class RadarStream(StreamNode):
             **kwargs,
         )
         prof = radar_profile(str(self.p["profile"]))
-        self.R = prof.r_radar
+        self.R = pose_covariance(prof, self.site)
         self.cov = report_covariance(prof, self.site)
         self.uav_class = RunningUavClass(prof.raw_radar_min_mean_uav_prob)
         pub = self.create_publisher
@@ -93,10 +97,11 @@ class RadarStream(StreamNode):
             if self.pub_tracks is not None:
                 n += self.send(self.pub_tracks, cv.radar_frame_to_cloud_msg(frame, fid, self.cov))
             for trk in frame.tracks:
+                R = self.R(trk.e, trk.n, trk.u)
                 if self.pub_pose is not None:
-                    n += self.send(self.pub_pose, cv.radar_track_to_msg(trk, self.R, fid))
+                    n += self.send(self.pub_pose, cv.radar_track_to_msg(trk, R, fid))
                 if self.uav_class.is_uav(trk) and self.pub_raw is not None:
-                    n += self.send(self.pub_raw, cv.radar_track_to_msg(trk, self.R, fid))
+                    n += self.send(self.pub_raw, cv.radar_track_to_msg(trk, R, fid))
         return n
 
 

@@ -98,6 +98,7 @@ class FusionEstimator:
         self.profile = profile
         self.site = site
         self._kf = CvKalman(profile.q)
+        assert profile.r_radar is not None and profile.r_rf is not None  # the profile's checks
         self._r: dict[str, PackedR] = {RADAR: pack_r(profile.r_radar), RF: pack_r(profile.r_rf)}
         self.gate_threshold: dict[int, float] = {
             d: nis_gate(profile.nis_probability, d) for d in (2, 3)

@@ -367,6 +367,7 @@ def radar_model_from_profile(profile: Profile, site: Site) -> RadarRModel:
             profile.radar_low_el_gain,
             profile.radar_low_el_deg,
         )
+    assert profile.r_radar is not None  # the profile's checks
     return FixedRadarR(pack_r(profile.r_radar))
 
 
@@ -382,7 +383,12 @@ def alignment_from_site(site: Site, az_deg: float | None = None) -> RadarAlignme
 
 def rf_model_from_profile(profile: Profile) -> RfRModel:
     """The RF measurement model (``measurement.rf``)."""
-    fixed = pack_r(profile.r_rf)
+    if profile.r_rf is not None:
+        fixed = pack_r(profile.r_rf)
+    else:  # a fix without a CEP counts as the coarsest that still updates (the profile's checks)
+        assert profile.rf_max_cep_m is not None and profile.rf_model == "cep"
+        s = max(profile.rf_floor_m, profile.rf_cep_scale * profile.rf_max_cep_m / CEP_PER_SIGMA)
+        fixed = (s * s, 0.0, s * s)
     if profile.rf_model == "cep":
         return CepRfR(
             profile.rf_cep_scale,

@@ -28,6 +28,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from uav_fusion.core.data.uav_class import uav_class_tracks
 from uav_fusion.core.estimators.kalman import PackedR
@@ -44,6 +45,7 @@ from uav_fusion.core.records import (
 from uav_fusion.core.site import Site
 
 StreamItem = Measurement | list[Measurement]
+FloatArray = npt.NDArray[np.float64]
 
 SOURCE_RANK = {RADAR: 0, RF: 1}
 
@@ -219,6 +221,22 @@ def selected_radar(flight: Flight, profile: Profile, site: Site) -> list[list[Me
 def raw_radar_reports(flight: Flight, profile: Profile) -> list[RadarTrack]:
     """The UAV reports of the raw radar row (the profile's per-track mean rule)."""
     return uav_class_tracks(flight.radar, profile.raw_radar_min_mean_uav_prob)
+
+
+def pose_covariance(profile: Profile, site: Site) -> Callable[[float, float, float], FloatArray]:
+    """The 3x3 ENU covariance a radar pose message carries for a report at (e, n, u): the
+    profile's fixed R (``measurement.radar.R``) when it has one, else its radar model's R
+    there (a tracker profile with the polar model)."""
+    if profile.r_radar is not None:
+        fixed = np.asarray(profile.r_radar, dtype=float)
+        return lambda e, n, u: fixed
+    cov = report_covariance(profile, site)
+    return lambda e, n, u: packed_array(cov(e, n, u))
+
+
+def packed_array(r: PackedR) -> FloatArray:
+    """The symmetric 3x3 array of a packed covariance (xx, xy, xz, yy, yz, zz)."""
+    return np.array([[r[0], r[1], r[2]], [r[1], r[3], r[4]], [r[2], r[4], r[5]]], dtype=float)
 
 
 def report_covariance(profile: Profile, site: Site) -> Callable[[float, float, float], PackedR]:

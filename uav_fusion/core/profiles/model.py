@@ -52,8 +52,10 @@ class Profile:
 
     name: str
     q: tuple[float, float, float]  # CWNA spectral density per axis, m^2/s^3
-    r_radar: FloatArray  # 3x3, m^2
-    r_rf: FloatArray  # 2x2, m^2
+    # 3x3 and 2x2, m^2; None: a tracker profile's polar radar model, and its RF fixes' CEP
+    # (a fix without one counts as max_cep_m)
+    r_radar: FloatArray | None = None
+    r_rf: FloatArray | None = None
     range_gate_m: float | None = 800.0  # None: the site's radar.range_gate_m
     far_gate_m: float | None = None  # horizontal-only radar updates out to this range
     nis_probability: float = 0.95
@@ -343,6 +345,16 @@ def _validate(p: Profile, where: str, origin: Mapping[str, str] | None = None) -
             f"{origin.get('measurement.radar.sigma_az_deg', where)}: measurement.radar: "
             "with measurement.adaptive, sigma_range_m, sigma_az_deg and sigma_el_deg are the "
             "specification the online sigmas are bounded around, so each must be > 0"
+        )
+    if p.r_radar is None and (not p.uses_tracker or p.radar_model == "fixed"):
+        raise ConfigError(
+            f"{where}: measurement.radar.R is needed (by the paper's estimator and by the "
+            "fixed radar model)"
+        )
+    if p.r_rf is None and (not p.uses_tracker or p.rf_model == "fixed" or p.rf_max_cep_m is None):
+        raise ConfigError(
+            f"{where}: measurement.rf.R is needed (by the paper's estimator, the fixed RF "
+            "model, and the CEP model without max_cep_m: a fix without a CEP)"
         )
     if p.radar_model == "polar" and p.radar_sigma_range_m + p.radar_floor_m <= 0:
         raise ConfigError(

@@ -132,8 +132,9 @@ _MOTION = (
 _MEASUREMENT = (
     _k("measurement.note", "r_note", TEXT, FITTED, "where R came from",
        fit="uav_fusion estimate-r --write-profile"),
-    _k("measurement.radar.R", "r_radar", MATRIX, FITTED, "radar covariance (east, north, up); "
-       "with model polar only for reports without a polar R", unit="m^2", size=3,
+    _k("measurement.radar.R", "r_radar", MATRIX, FITTED, "radar covariance (east, north, up) "
+       "of the paper's estimator and the fixed model", unit="m^2", size=3,
+       null="none: the polar model's R at each report (trackers)",
        fit="uav_fusion estimate-r --write-profile"),
     *_group("measurement.radar", TRACKER,
         _k("model", "radar_model", CHOICE, DESIGN, "fixed: R for every report; polar: R from "
@@ -155,8 +156,9 @@ _MEASUREMENT = (
         _k("low_el_deg", "radar_low_el_deg", NUMBER, PHYSICAL, "the elevation scale of the "
            "ground-multipath term", unit="deg", bounds="> 0"),
     ),
-    _k("measurement.rf.R", "r_rf", MATRIX, FITTED, "RF covariance (east, north); with model "
-       "cep only for fixes without a CEP", unit="m^2", size=2,
+    _k("measurement.rf.R", "r_rf", MATRIX, FITTED, "RF covariance (east, north) of the paper's "
+       "estimator and the fixed model", unit="m^2", size=2,
+       null="none: the CEP model's R; a fix without a CEP counts as measurement.rf.max_cep_m",
        fit="uav_fusion estimate-r --write-profile"),
     *_group("measurement.rf", TRACKER,
         _k("model", "rf_model", CHOICE, DESIGN, "fixed: R for every fix; cep: sigma = max("
