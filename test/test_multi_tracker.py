@@ -411,6 +411,29 @@ def test_a_uav_on_its_pad_with_its_link_on_is_no_target_until_the_radar_sees_it(
     assert late[-1].tracks[0].emitter == emitter_key(FREQ_A)
 
 
+@pytest.mark.parametrize("coast", [3.0, 10.0])
+def test_inside_radar_cover_a_track_is_published_while_the_radar_saw_it_recently(
+    site: Site, coast: float
+) -> None:
+    """An emitting UAV inside radar cover that the radar stops seeing at 60 s: its fixes keep
+    its track alive and updated, but it is published only while both its last update and its
+    last radar update are at most ``output_coast_s`` old (inside radar cover an emitter the
+    radar does not see is on the ground)."""
+    path = _flight(np.array([-200.0, 300.0, 0.0]), 2.0, np.array([6.0, 0.0, 0.0]))
+    uav = Uav(path, 10, seen=lambda tau: tau < 60.0, freq_hz=FREQ_A)
+    stream = scene_stream(site, [uav], 90.0, 3)
+    fixes = [it.t - 1000.0 for it in stream if isinstance(it, RfAttempt)]
+    mt = MultiTracker(load_profile("tracker"), site, MultiSettings(output_coast_s=coast))
+    epochs = run_multi(mt, stream, 1.0, 1000.0, 1089.0)
+    published = {round(ep.t - 1000.0) for ep in epochs if _near(site, ep, path)}
+    last_radar = 59.75
+    for t in range(56, 80):
+        last_fix = max(f for f in fixes if f <= t)
+        fresh = t - max(last_radar, last_fix) <= coast
+        assert (t in published) == (fresh and t - last_radar <= coast), t
+    assert mt.tracks and mt.tracks[0].emitter == emitter_key(FREQ_A)  # alive on its fixes
+
+
 def test_a_grounded_emitter_does_not_take_over_another_uavs_radar_track(site: Site) -> None:
     """A UAV on its pad with its link on, and a silent UAV taking off 150 m away: the silent
     UAV's track carries no emitter, and nothing is published on the pad."""
