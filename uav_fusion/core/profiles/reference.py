@@ -110,7 +110,7 @@ def _shipped(key: Key, p: Profile) -> str:
     if key.path.startswith("motion.imm.") and p.motion_model != "imm":
         return ""
     if key.kind == MATRIX:
-        return "fitted"
+        return "fitted" if value_of(p, key) is not None else "`null`"
     return f"`{_yaml(value_of(p, key))}`"
 
 
