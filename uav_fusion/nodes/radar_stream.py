@@ -97,11 +97,14 @@ class RadarStream(StreamNode):
             if self.pub_tracks is not None:
                 n += self.send(self.pub_tracks, cv.radar_frame_to_cloud_msg(frame, fid, self.cov))
             for trk in frame.tracks:
-                R = self.R(trk.e, trk.n, trk.u)
+                raw = self.pub_raw if self.uav_class.is_uav(trk) else None
+                if self.pub_pose is None and raw is None:
+                    continue
+                R = self.R(trk.e, trk.n, trk.u)  # the same R on both topics
                 if self.pub_pose is not None:
                     n += self.send(self.pub_pose, cv.radar_track_to_msg(trk, R, fid))
-                if self.uav_class.is_uav(trk) and self.pub_raw is not None:
-                    n += self.send(self.pub_raw, cv.radar_track_to_msg(trk, R, fid))
+                if raw is not None:
+                    n += self.send(raw, cv.radar_track_to_msg(trk, R, fid))
         return n
 
 

@@ -383,19 +383,15 @@ def alignment_from_site(site: Site, az_deg: float | None = None) -> RadarAlignme
 
 def rf_model_from_profile(profile: Profile) -> RfRModel:
     """The RF measurement model (``measurement.rf``)."""
-    if profile.r_rf is not None:
-        fixed = pack_r(profile.r_rf)
-    else:  # a fix without a CEP counts as the coarsest that still updates (the profile's checks)
-        assert profile.rf_max_cep_m is not None and profile.rf_model == "cep"
-        s = max(profile.rf_floor_m, profile.rf_cep_scale * profile.rf_max_cep_m / CEP_PER_SIGMA)
-        fixed = (s * s, 0.0, s * s)
     if profile.rf_model == "cep":
-        return CepRfR(
-            profile.rf_cep_scale,
-            profile.rf_floor_m,
-            fixed,
-        )
-    return FixedRfR(fixed)
+        model = CepRfR(profile.rf_cep_scale, profile.rf_floor_m, (0.0, 0.0, 0.0))
+        if profile.r_rf is not None:
+            return replace(model, fallback=pack_r(profile.r_rf))
+        # a fix without a CEP counts as the coarsest that still updates (the profile's checks)
+        assert profile.rf_max_cep_m is not None
+        return replace(model, fallback=model.r_for(profile.rf_max_cep_m))
+    assert profile.r_rf is not None  # the profile's checks
+    return FixedRfR(pack_r(profile.r_rf))
 
 
 def robust_from_profile(profile: Profile) -> RobustWeight:

@@ -227,16 +227,13 @@ def pose_covariance(profile: Profile, site: Site) -> Callable[[float, float, flo
     """The 3x3 ENU covariance a radar pose message carries for a report at (e, n, u): the
     profile's fixed R (``measurement.radar.R``) when it has one, else its radar model's R
     there (a tracker profile with the polar model)."""
+    from uav_fusion.core.estimators.parts import packed_to_array
+
     if profile.r_radar is not None:
         fixed = np.asarray(profile.r_radar, dtype=float)
         return lambda e, n, u: fixed
     cov = report_covariance(profile, site)
-    return lambda e, n, u: packed_array(cov(e, n, u))
-
-
-def packed_array(r: PackedR) -> FloatArray:
-    """The symmetric 3x3 array of a packed covariance (xx, xy, xz, yy, yz, zz)."""
-    return np.array([[r[0], r[1], r[2]], [r[1], r[3], r[4]], [r[2], r[4], r[5]]], dtype=float)
+    return lambda e, n, u: packed_to_array(cov(e, n, u))
 
 
 def report_covariance(profile: Profile, site: Site) -> Callable[[float, float, float], PackedR]:
