@@ -17,7 +17,7 @@ from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import Profile, load_profile, run_flight
 from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.gates import PhysicalGates
-from uav_fusion.core.estimators.objects import ObjectTable
+from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
 from uav_fusion.core.estimators.steps import TrackerStep
@@ -680,6 +680,47 @@ def test_a_challenger_whose_radar_track_coasts_every_other_frame_still_takes_ove
     assert first_new < swap_t + 20.0
     late = [s for s in steps if s.counted and s.t > first_new + 2.0]
     assert late and max(sc.error(s) for s in late) < 40.0
+
+
+@pytest.mark.parametrize(("above", "challenged"), [(0.05, True), (-0.05, False)])
+def test_the_challenge_compares_scores_without_the_agreement_with_the_fused_track(
+    site: Site, above: float, challenged: bool
+) -> None:
+    # the followed object agrees fully with the track (the track follows it); a challenger
+    # outside the gate outscores it by the margin +-0.05 on everything else. Counted with the
+    # agreement, no challenger short of margin + fused_weight could ever take the track over.
+    tracker = Tracker(load_profile("tracker"), site)
+    cfg = tracker.cfg
+    assert cfg.fused_weight >= 1.0 and cfg.challenge_s > 0.0
+    fol = tracker.objects.objects.setdefault(1, RadarObject(1, 0.0))
+    ch = tracker.objects.objects.setdefault(2, RadarObject(2, 0.0))
+    for obj in (fol, ch):
+        obj.n_reports = cfg.init_min_reports
+        obj.speed = 10.0
+        obj.up = 60.0
+    fol.fused = 1.0
+    fol.class_logit = 1.0
+    ch.class_logit = 1.0 + (cfg.challenge_margin + above) / cfg.class_weight
+    tracker.followed = 1
+    assert ch.score(cfg) >= cfg.init_min
+    assert ch.score(cfg) < fol.score(cfg)  # with the agreement, the followed object leads
+    follow = tracker.follow
+
+    def frame(t: float) -> bool:
+        for obj in (fol, ch):
+            obj.last_t = t
+        def rep(i: int) -> RadarTrack:
+            return RadarTrack(t, i, 0.0, 0.0, 60.0, 0.0, 0.0, 60.0, None, None, None, None)
+
+        z, r = (0.0, 0.0, 60.0), (1.0, 0.0, 0.0, 1.0, 0.0, 1.0)
+        scored = [
+            (0, rep(1), fol, fol.score(cfg), z, r, 1.0, True),  # inside the gate
+            (1, rep(2), ch, ch.score(cfg), z, r, 50.0, False),  # outside it
+        ]
+        return follow._challenged(t, scored)
+
+    assert not frame(100.0)  # the challenger's clock starts
+    assert frame(100.0 + cfg.challenge_s) is challenged
 
 
 @pytest.mark.parametrize(("key", "value"), [("challenge_margin", 20.0), ("challenge_s", 1000.0)])

@@ -18,7 +18,8 @@ score):
   and the same object outside the gate has reached ``init_min`` (with ``init_min_reports``
   reports) and outscored the followed object by ``challenge_margin``, the radar's track has
   most likely left the UAV: the track is dropped (``reinit_challenged``) and started again
-  from the frame's reports;
+  from the frame's reports. The two are compared without their agreement with the fused
+  track, which the followed object has because the track follows it;
 - no confirmed track: the object with the highest score reaching ``init_min`` with at least
   ``init_min_reports`` reports starts a confirmed track from its own filter's state; a
   tentative RF track is confirmed by a strong report inside its gate or superseded by one.
@@ -238,7 +239,14 @@ class RadarFollower:
             if best is None or e[3] > best[3]:
                 best = e
         fol = tr.objects.objects.get(tr.followed) if tr.followed is not None else None
-        if best is None or fol is None or best[3] < fol.score(cfg) + cfg.challenge_margin:
+        # compared without the agreement with the fused track: the followed object agrees
+        # with the track because the track follows it, and an object outside the gate
+        # cannot agree with it
+        if (
+            best is None
+            or fol is None
+            or best[2].score(cfg, fused=False) < fol.score(cfg, fused=False) + cfg.challenge_margin
+        ):
             ch = self.challenger
             if (
                 best is None

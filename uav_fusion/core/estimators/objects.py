@@ -144,8 +144,10 @@ class RadarObject:
             lim = k * self.sd_up
         return self.up < -lim
 
-    def score(self, cfg: ScoreConfig) -> float:
-        """The UAV score at the object's last report (see the module text)."""
+    def score(self, cfg: ScoreConfig, fused: bool = True) -> float:
+        """The UAV score at the object's last report (see the module text); without the
+        agreement with the fused track when ``fused`` is false (the evidence the object
+        carries of its own)."""
         s = cfg.class_weight * self.class_logit
         age = self.age_s
         if self.below_ground(cfg):  # a multipath ghost
@@ -169,7 +171,8 @@ class RadarObject:
             sup = sup * math.exp(-(self.last_t - self.rf_t) / tau) if tau > 0 else 0.0
         rf_max = cfg.rf_max
         s += cfg.rf_weight * (sup if sup < rf_max else rf_max)
-        s += cfg.fused_weight * self.fused
+        if fused:
+            s += cfg.fused_weight * self.fused
         full = cfg.class_tau_s
         if full > 0:
             f = age / full
