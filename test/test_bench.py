@@ -233,6 +233,8 @@ def test_registration_is_judged_against_the_true_mount_within_the_tolerance_or_t
     assert not RegistrationOutcome(0.61, 0.02, 0.05, 0.5).within(0.1)
     assert RegistrationOutcome(0.79, 0.1, 0.3, 0.5).within(0.1)  # within its wider bound
     assert not RegistrationOutcome(0.81, 0.1, 0.3, 0.5).within(0.1)
+    assert RegistrationOutcome(0.99, 0.1, 0.3, 0.5).within(0.1, 1.645)  # 0.49 <= 0.4935
+    assert not RegistrationOutcome(1.0, 0.1, 0.3, 0.5).within(0.1, 1.645)
 
     def result(reg: RegistrationOutcome | None) -> Any:
         return types.SimpleNamespace(profile="tracker", registration=reg)
@@ -246,5 +248,6 @@ def test_registration_is_judged_against_the_true_mount_within_the_tolerance_or_t
     ])
     assert lines == [
         "tracker: azimuth within 0.1 deg of the true mount, or within the flight's bound, on 2 of "
-        "3 flights (1 within 0.1 deg); bound median 0.30 deg, 0.05-0.30"
+        "3 flights (1 within 0.1 deg; within 1.645 bounds on 3); bound median 0.30 deg, "
+        "0.05-0.30"
     ]

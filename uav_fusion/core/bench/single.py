@@ -58,11 +58,11 @@ class RegistrationOutcome:
     def error_deg(self) -> float | None:
         return None if self.true_deg is None else abs(self.az_deg - self.true_deg)
 
-    def within(self, tol_deg: float) -> bool | None:
-        """Within ``tol_deg`` of the true mount, or within the bound where that is larger
-        (None without a true mount)."""
+    def within(self, tol_deg: float, bounds: float = 1.0) -> bool | None:
+        """Within ``tol_deg`` of the true mount, or within ``bounds`` times the bound where
+        that is larger (None without a true mount)."""
         err = self.error_deg
-        return None if err is None else err <= max(tol_deg, self.bound_deg)
+        return None if err is None else err <= max(tol_deg, bounds * self.bound_deg)
 
 
 @dataclass(frozen=True)
