@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators import load_profile, profile_from_dict
+from uav_fusion.core.estimators import Profile, load_profile, profile_from_dict
 from uav_fusion.core.estimators.emitters import UNKNOWN_EMITTER, emitter_key
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.kalman import merge_nis, velocity_nis
@@ -621,56 +621,66 @@ def test_beyond_the_range_gate_tracks_are_updated_and_born_horizontally(site: Si
     assert sum(1 for ep in near if ep.tracks and high(ep.t - 1000.0)) < 10
 
 
+def _with_class_tau(tau_s: float) -> Profile:
+    p = load_profile("tracker")
+    return dataclasses.replace(p, score=dataclasses.replace(p.score, class_tau_s=tau_s))
+
+
 def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site: Site) -> None:
-    """A silent UAV seen from its take-off gets its track after 4 s of radar reports (it
-    moves: `early_birth_age_s`, `early_birth_speed_mps`), not after the 8 s the stationary
-    cue needs; a reflector the radar classes as a UAV just as often, standing still, gets
-    none either way."""
+    """A silent UAV seen from its take-off gets its track once its radar object is
+    `association.class.tau_s` old (it moves at `association.stationary.speed_mps` or more),
+    not after the 8 s (`stationary.min_age_s`) the stationary cue needs; a reflector the radar
+    classes as a UAV just as often, standing still, gets none either way."""
     path = _flight(np.array([-200.0, 300.0, 0.0]), 10.0, np.array([8.0, 0.0, 0.0]))
     uav = Uav(path, 10, seen=lambda tau: tau >= 10.0)
     mast = np.array([150.0, 350.0, 30.0])
     reflector = Uav(lambda tau: mast.copy(), 99)
     stream = scene_stream(site, [uav, reflector], 60.0, 7)
     firsts = {}
-    for early in (4.0, None):
-        settings = MultiSettings(early_birth_age_s=early)
-        epochs = run_multi(MultiTracker(load_profile("tracker"), site, settings), stream,
-                           4.0, 1000.0, 1059.75)  # fmt: skip
+    for tau_s in (5.0, 8.0):
+        prof = _with_class_tau(tau_s)
+        assert prof.score.stationary_min_age_s == 8.0
+        epochs = run_multi(MultiTracker(prof, site), stream, 4.0, 1000.0, 1059.75)
         on_uav = [ep.t - 1000.0 for ep in epochs if _near(site, ep, path)]
         assert on_uav
-        firsts[early] = on_uav[0]
+        firsts[tau_s] = on_uav[0]
         r0 = np.array(site.radar.enu, dtype=float)
         assert not any(
             np.linalg.norm(o.x[:3] - (r0 + mast)) < 30.0 for ep in epochs for o in ep.tracks
         )
-    assert MultiSettings().early_birth_age_s == 4.0
-    assert firsts[4.0] <= 15.0 and firsts[None] - firsts[4.0] >= 3.0  # 14.0 and 18.0 s
+    assert load_profile("tracker").score.class_tau_s == 5.0
+    assert firsts[5.0] <= 16.0 and firsts[8.0] - firsts[5.0] >= 2.5
 
 
 def test_the_profiles_multi_section_sets_the_tracker(site: Site, tmp_path: Path) -> None:
-    """A profile file's ``multi`` section reaches a tracker built from the profile alone: the
-    silent moving UAV of the early-birth case is born later with ``early_birth_age_s: null``
-    in the file, as with the same setting passed in code; the shipped tracker profile spells
-    out the defaults it was measured with."""
+    """A profile file's ``multi`` section reaches a tracker built from the profile alone: a
+    UAV the radar loses for 7 s stays published through the gap with ``output_coast_s:
+    null`` in the file, as with the same setting passed in code, and not with the shipped 3 s;
+    the shipped tracker profile spells out the defaults it was measured with."""
     shipped = load_profile("tracker")
     assert shipped.multi == MultiSettings()
-    path = _flight(np.array([-200.0, 300.0, 0.0]), 10.0, np.array([8.0, 0.0, 0.0]))
-    stream = scene_stream(site, [Uav(path, 10, seen=lambda tau: tau >= 10.0)], 40.0, 7)
+    path = _flight(np.array([-200.0, 300.0, 0.0]), 5.0, np.array([8.0, 0.0, 0.0]))
+    gap = (25.0, 32.0)
+    seen = Uav(path, 10, seen=lambda tau: not gap[0] <= tau < gap[1])
+    stream = scene_stream(site, [seen], 40.0, 7)
     doc = shipped.as_dict()
-    doc["multi"] = {"early_birth_age_s": None}
-    f = tmp_path / "late_births.yaml"
+    doc["multi"] = {"output_coast_s": None}
+    f = tmp_path / "kept.yaml"
     f.write_text(yaml.safe_dump(doc))
-    late = load_profile(f)
-    assert late.multi.early_birth_age_s is None and late.multi.merge_s == 3.0
+    kept = load_profile(f)
+    assert kept.multi.output_coast_s is None and kept.multi.merge_s == 3.0
 
-    def first_on_uav(tracker: MultiTracker) -> float:
+    def published_in_gap(tracker: MultiTracker) -> int:
         epochs = run_multi(tracker, stream, 4.0, 1000.0, 1039.75)
-        return next(ep.t - 1000.0 for ep in epochs if _near(site, ep, path))
+        return sum(1 for ep in epochs if gap[0] <= ep.t - 1000.0 < gap[1] and ep.tracks)
 
-    from_file = first_on_uav(MultiTracker(late, site))
-    in_code = first_on_uav(MultiTracker(shipped, site, MultiSettings(early_birth_age_s=None)))
-    default = first_on_uav(MultiTracker(shipped, site))
-    assert from_file == in_code and from_file - default >= 3.0
+    from_file = published_in_gap(MultiTracker(kept, site))
+    in_code = published_in_gap(
+        MultiTracker(shipped, site, MultiSettings(output_coast_s=None))
+    )
+    default = published_in_gap(MultiTracker(shipped, site))
+    assert from_file == in_code == 28  # every epoch of the gap
+    assert default <= 14  # 3 s after the last radar update, and no more
 
 
 @pytest.mark.parametrize(
@@ -701,7 +711,7 @@ def test_a_bad_multi_key_stops_naming_the_file_and_key(
 
 def test_a_profile_round_trips_its_multi_section() -> None:
     p = load_profile("tracker")
-    changed = dataclasses.replace(p.multi, merge_s=5.0, emitter_misses=None, early_birth_age_s=None)
+    changed = dataclasses.replace(p.multi, merge_s=5.0, emitter_misses=None, birth_sep_m=None)
     doc = dataclasses.replace(p, multi=changed).as_dict()
     assert profile_from_dict(doc).multi == changed
     assert "multi" not in load_profile("paper").as_dict()  # the paper's profile as it was

@@ -62,6 +62,8 @@ MOVED = {
     "multi.flat_below_ground": "always (true in all)",
     "multi.tentative_takes_radar": "never (false in all)",
     "score.rf_memory_s": "association.rf.tau_s (15 s for the tracker, 30 s before)",
+    "multi.early_birth_age_s": "association.class.tau_s (5 s for the tracker, 4 s before)",
+    "multi.early_birth_speed_mps": "association.stationary.speed_mps (1.5 m/s, 3 m/s before)",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}

@@ -24,9 +24,9 @@ Per radar frame (one time for all reports):
    weight); a confirmed track whose own radar object reported outside its gate counts a
    rejection;
 4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
-   ``init_min_reports`` reports), old enough (the score's ``stationary_min_age_s``, or
-   ``early_birth_age_s`` while
-   it moves at ``early_birth_speed_mps``, or with RF support) and outside every track's gate
+   ``init_min_reports`` reports), old enough (the score's ``stationary_min_age_s``, or its
+   ``class_tau_s`` while it moves at ``stationary_speed_mps`` or more, or with RF support)
+   and outside every track's gate
    starts a confirmed track from its object's state (at the RF start's height prior when it
    has no usable height; never from a ghost below the ground);
 5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
@@ -480,15 +480,15 @@ class MultiTracker:
 
     def _old_enough(self, obj: RadarObject, t: float) -> bool:
         """Whether a strong object has been seen long enough to start a track: for the
-        score's ``stationary_min_age_s`` (by then clutter has shown that it stands still), or for
-        ``early_birth_age_s`` while its mean speed is at least ``early_birth_speed_mps``, or
-        at any age with RF support."""
-        st = self.settings
+        score's ``stationary_min_age_s`` (by then clutter has shown that it stands still); for
+        ``class_tau_s`` (its class history and age term are full) while its mean speed is at
+        least ``stationary_speed_mps`` (it does not stand still); or at any age with RF
+        support."""
+        cfg = self.cfg
         age = obj.age_s
-        if age >= self.cfg.stationary_min_age_s or obj.rf_support_at(t, self.cfg.rf_tau_s) > 0.0:
+        if age >= cfg.stationary_min_age_s or obj.rf_support_at(t, cfg.rf_tau_s) > 0.0:
             return True
-        early = st.early_birth_age_s
-        return early is not None and age >= early and obj.speed >= st.early_birth_speed_mps
+        return age >= cfg.class_tau_s and obj.speed >= cfg.stationary_speed_mps
 
     def _apart(self, a: int, b: int, took: dict[int, int], cands: list[_Cand]) -> bool:
         """Whether candidate ``b``, inside live track ``a``'s gate, is another UAV than the

@@ -349,12 +349,6 @@ _MULTI = _group(
        "assignment cost", bounds=">= 0"),
     _m("velocity_sigma_mps", NUMBER, DESIGN, "error of a radar track's reported velocity, per "
        "axis", unit="m/s", bounds="> 0"),
-    _m("early_birth_age_s", NUMBER, FITTED, "a strong object starts a track from the age "
-       "association.stationary.min_age_s, or from this age when moving at "
-       "early_birth_speed_mps", unit="s", bounds=">= 0", null="only from that age",
-       fit=TUNED),
-    _m("early_birth_speed_mps", NUMBER, DESIGN, "the mean speed of an early birth",
-       unit="m/s", bounds=">= 0"),
     _m("birth_sep_m", NUMBER, DESIGN, "a strong object in a track's gate starts its own track "
        "when the track took a report this far away in the same frame", unit="m",
        bounds=">= 0", null="never"),
@@ -412,6 +406,10 @@ RETIRED: dict[str, str] = {
     "association.rf.memory_s": "a fix that credits no object is kept for association.rf.tau_s",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
+    "multi.early_birth_age_s": "a strong object moving at association.stationary.speed_mps or "
+    "more starts a track from the age association.class.tau_s",
+    "multi.early_birth_speed_mps": "a strong object moving at association.stationary.speed_mps "
+    "or more starts a track from the age association.class.tau_s",
 }
 
 

@@ -28,9 +28,6 @@ class MultiSettings:
     # track's gate unlink the emitter from it (None: never)
     birth_sep_m: float | None = 60.0  # a strong object inside a track's gate starts a track
     # when that track took another report of the frame this far away (None: never)
-    early_birth_age_s: float | None = 4.0  # an object moving at early_birth_speed_mps or
-    early_birth_speed_mps: float = 3.0  # more (mean speed) may start a track from this age
-    # (None: only from birth_age_s, or with RF support)
     emitter_follow_min: float | None = 0.0  # an object scoring this much (below follow_min)
     # that its emitter's fixes credit may update the track carrying that emitter (None: off)
 
