@@ -22,7 +22,7 @@ from uav_fusion.core.profiles.model import (
     profile_from_dict,
 )
 from uav_fusion.core.profiles.reference import readme
-from uav_fusion.core.profiles.schema import KEYS, SECTIONS
+from uav_fusion.core.profiles.schema import DERIVED, KEYS, SECTIONS
 from uav_fusion.core.profiles.settings import MultiSettings, ScoreConfig
 from uav_fusion.resources import config_path
 
@@ -61,7 +61,7 @@ MOVED = {
     "multi.merge_keeps_live": "always (true in all)",
     "multi.flat_below_ground": "always (true in all)",
     "multi.tentative_takes_radar": "never (false in all)",
-    "score.rf_memory_s": "association.rf.tau_s (15 s for the tracker, 30 s before)",
+    "score.rf_memory_s": "track.max_coast_s (20 s for the tracker, 30 s before)",
     "multi.early_birth_age_s": "association.class.tau_s (5 s for the tracker, 4 s before)",
     "multi.early_birth_speed_mps": "association.stationary.speed_mps (1.5 m/s, 3 m/s before)",
 }
@@ -72,6 +72,7 @@ RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_m
 RETUNED: dict[str, dict[str, Any]] = {
     "tracker": {
         "score.class_tau_s": 5.0,
+        "score.rf_tau_s": 20.0,  # its track.max_coast_s
         "max_consecutive_rejections": None,
         # the fitted fallback matrices went: the polar model gives every report its R, and a
         # fix without a CEP counts as max_cep_m
@@ -81,7 +82,7 @@ RETUNED: dict[str, dict[str, Any]] = {
 }
 # Defaults changed since, seen by the profiles that do not set them (the paper's estimator
 # reads no association key).
-DEFAULTS = {"paper": {"score.large_rcs_dbsm": 0.0}}
+DEFAULTS = {"paper": {"score.large_rcs_dbsm": 0.0, "score.rf_tau_s": 15.0}}
 
 
 def _without(fields: dict[str, Any], paths: Any) -> dict[str, Any]:
@@ -169,7 +170,7 @@ def test_profile_show_prints_the_resolved_profile(capsys: pytest.CaptureFixture[
     assert main(["profile", "show", "tracker_smoothed"]) == 0
     doc = yaml.safe_load(capsys.readouterr().out)
     assert doc["name"] == "tracker_smoothed" and doc["smoother"] == {"lag_s": 3.0}
-    assert doc["association"]["rf"]["tau_s"] == 15.0 and "extends" not in doc
+    assert doc["track"]["max_coast_s"] == 20.0 and "extends" not in doc
 
 
 # --- the schema -------------------------------------------------------------------------------
@@ -178,7 +179,7 @@ def test_every_field_has_exactly_one_key() -> None:
     assert len(attrs) == len(set(attrs))
     assert len({k.path for k in KEYS}) == len(KEYS)
     want = {f.name for f in dataclasses.fields(Profile)} - {"source", "score", "multi"}
-    want |= {f"score.{f.name}" for f in dataclasses.fields(ScoreConfig)}
+    want |= {f"score.{f.name}" for f in dataclasses.fields(ScoreConfig)} - set(DERIVED)
     want |= {f"multi.{f.name}" for f in dataclasses.fields(MultiSettings)}
     assert set(attrs) == want
 
@@ -205,7 +206,7 @@ def test_extends_merges_mappings_and_replaces_lists_and_values(tmp_path: Path) -
         "extends": "tracker",
         "name": "base",
         "track": {"init_sources": ["radar"], "max_coast_s": 30.0},
-        "association": {"rf": {"tau_s": 20.0}},
+        "association": {"rf": {"max": 2.0}},
     })
     child = _write(tmp_path / "child.yaml", {
         "extends": "base.yaml",  # a path: relative to this file
@@ -218,7 +219,8 @@ def test_extends_merges_mappings_and_replaces_lists_and_values(tmp_path: Path) -
     assert p.init_sources == ("radar",) and p.max_coast_s == 30.0  # from base, two deep
     assert p.tentative_sources == () and p.max_consecutive_rejections is None  # null sets null
     assert p.multi.emitter_misses is None and p.multi.merge_s == tracker.multi.merge_s
-    assert (p.score.rf_tau_s, p.score.rf_window_s) == (20.0, 10.0)  # merged key by key
+    assert (p.score.rf_max, p.score.rf_window_s) == (2.0, 10.0)  # merged key by key
+    assert p.score.rf_tau_s == 30.0  # RF evidence lasts as long as a coast
     assert p.score.follow_min == tracker.score.follow_min and p.estimator == "tracker"
     assert profile_files(child) == (child, base, config_path("profiles/tracker.yaml"))
 
@@ -264,15 +266,15 @@ def _tracker_doc() -> dict[str, Any]:
     [
         # unknown
         (lambda d: d["association"]["rf"].update(tau=3.0),
-         r"unknown key 'association\.rf\.tau' \(allowed: weight, tau_s, max, window_s, "),
+         r"unknown key 'association\.rf\.tau' \(allowed: weight, max, window_s, "),
         (lambda d: d.update(colour="red"), r"unknown key 'colour' \(allowed: name, "),
         (lambda d: d["association"].update(cars={"weight": 1.0}), r"unknown key 'association\."
          r"cars'"),
         # misplaced: a known key in the wrong section, or under its old flat name
         (lambda d: d["gating"].update(max_coast_s=9.0),
          r"unknown key 'gating\.max_coast_s': it belongs at track\.max_coast_s"),
-        (lambda d: d["association"].update(rf_tau_s=9.0),
-         r"unknown key 'association\.rf_tau_s': it belongs at association\.rf\.tau_s"),
+        (lambda d: d["association"].update(rf_max=9.0),
+         r"unknown key 'association\.rf_max': it belongs at association\.rf\.max"),
         (lambda d: d["association"]["class"].update(challenge_s=2.0),
          r"'association\.class\.challenge_s': it belongs at association\.takeover\.challenge_s"),
         (lambda d: d.update(imm={}), r"unknown key 'imm': it belongs at motion\.imm"),

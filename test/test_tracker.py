@@ -1058,9 +1058,11 @@ def test_an_emitter_the_radar_does_not_see_yet_supports_the_object_that_appears_
     tau_s: float,
 ) -> None:
     """Fixes that credit no object (a UAV on its pad, link on, no radar track) are kept for
-    ``rf_tau_s``; the first object that appears inside their gate takes their support,
-    decayed since; an object elsewhere, a fix too old or an object seen before get none."""
-    cfg = dataclasses.replace(ScoreConfig(), rf_tau_s=tau_s)
+    the profile's ``track.max_coast_s``; the first object that appears inside their gate takes
+    their support, decayed since; an object elsewhere, a fix too old or an object seen before
+    get none."""
+    cfg = load_profile("tracker").with_changes(max_coast_s=tau_s).score
+    assert cfg.rf_tau_s == tau_s
     table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
 
     def report(t: float, tid: int, east: float) -> RadarTrack:

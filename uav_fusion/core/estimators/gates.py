@@ -9,9 +9,9 @@ says so:
   the last confirmed update), a radar object may start the next track only when it is
   *reachable* (within ``track.max_speed_mps`` times the time since the anchor, plus
   ``association.takeover.reach_margin_m`` for the errors of both positions) or *corroborated*
-  (an RF fix was credited to it within ``association.rf.tau_s``: radar and RF agree). A
-  tentative RF track needs M of N agreeing fixes before it is confirmed: several RF fixes
-  agreeing with each other.
+  (an RF fix was credited to it within ``track.max_coast_s``, the score's ``rf_tau_s``:
+  radar and RF agree). A tentative RF track needs M of N agreeing fixes before it is
+  confirmed: several RF fixes agreeing with each other.
 * **Ground objects.** After take-off (a confirmed state once stood clearly above the ground)
   an object near the ground and stationary is never the UAV without corroboration, however
   reachable: a parked vehicle, a mast or a reflector sits there for the whole flight. The

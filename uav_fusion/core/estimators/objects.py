@@ -27,8 +27,9 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   ``large_rcs_dbsm`` is too large for a small UAV (``-large_rcs_weight``; a reflector, a
   car); one without RCS reports is not judged;
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
-  horizontal position adds one unit of support, decaying with time constant ``rf_tau_s`` and
-  capped at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
+  horizontal position adds one unit of support, decaying with time constant ``rf_tau_s``
+  (the profile's ``track.max_coast_s``) and capped at ``rf_max``, times ``rf_weight`` (an
+  emitter at the object's position is strong
   evidence of a UAV); a fix credits only the object it fits best (smallest gate distance),
   not every object in its gate (clutter beside a UAV, or near a UAV on its pad that the
   radar does not see, would otherwise share the UAV's emitter); a fix too

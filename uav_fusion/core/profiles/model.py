@@ -12,6 +12,7 @@ against; the defaults are those of :class:`Profile`, :class:`ScoreConfig` and
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass, field, fields, replace
 from pathlib import Path
@@ -107,6 +108,12 @@ class Profile:
     # the multi-UAV tracker's own settings (the ``multi`` section; multi_settings.py)
     multi: MultiSettings = field(default_factory=MultiSettings)
     source: Path | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        # the trackers' RF evidence lasts as long as a track may coast (schema.DERIVED)
+        tau = math.inf if self.max_coast_s is None else float(self.max_coast_s)
+        if self.score.rf_tau_s != tau:
+            object.__setattr__(self, "score", replace(self.score, rf_tau_s=tau))
 
     @property
     def init_velocity_std_mps(self) -> float:

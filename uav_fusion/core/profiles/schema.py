@@ -221,7 +221,11 @@ _TRACK = _group(
     _k("max_consecutive_rejections", "max_consecutive_rejections", INTEGER, DESIGN, "the track "
        "restarts after this many NIS rejections in a row", bounds=">= 1", null="never"),
     _k("max_coast_s", "max_coast_s", NUMBER, DESIGN, "the track restarts when nothing was "
-       "accepted for this long (a few RF intervals)", unit="s", bounds="> 0", null="never"),
+       "accepted for this long (a few RF intervals); the trackers' RF evidence lasts as "
+       "long: an object's RF support decays with this time constant, and a fix that credits "
+       "no object is kept this long for a new object in its gate (a UAV on its pad before "
+       "the radar has a track on it)", unit="s", bounds="> 0", null="never (RF support does "
+       "not decay)"),
 )
 _UPDATE = _group(
     "update", TRACKER,
@@ -285,9 +289,6 @@ _ASSOCIATION = (
     *_group("association.rf", TRACKER,
         _s("weight", "rf_weight", NUMBER, DESIGN, "weight of the RF support (fixes inside the "
            "object's 99 % gate)", bounds=">= 0"),
-        _s("tau_s", "rf_tau_s", NUMBER, DESIGN, "the support decays with this time constant, "
-           "and a fix that credits no object is kept this long for a new object in its gate "
-           "(a UAV on its pad before the radar has a track on it)", unit="s", bounds=">= 0"),
         _s("max", "rf_max", NUMBER, DESIGN, "the support is capped at this", bounds=">= 0"),
         _s("window_s", "rf_window_s", NUMBER, DESIGN, "a fix credits objects with a report "
            "this recent", unit="s", bounds=">= 0"),
@@ -380,6 +381,9 @@ KEYS: tuple[Key, ...] = (
 BY_PATH: dict[str, Key] = {k.path: k for k in KEYS}
 
 #: Keys that have left the schema, with what a profile that still sets one should do.
+#: Attributes a profile derives from another key instead of reading a key of their own.
+DERIVED: dict[str, str] = {"score.rf_tau_s": "track.max_coast_s"}
+
 RETIRED: dict[str, str] = {
     "update.vz_hold_after_s": "it is update.hold_after_s",
     "update.vz_hold_sigma_mps": "it is update.hold_sigma_mps",
@@ -403,7 +407,9 @@ RETIRED: dict[str, str] = {
     "multi.merge_keeps_live": "always: a merge keeps the recently updated track",
     "multi.flat_below_ground": "always: a report below the ground updates east and north only",
     "multi.tentative_takes_radar": "never: a tentative (RF) track takes no radar report",
-    "association.rf.memory_s": "a fix that credits no object is kept for association.rf.tau_s",
+    "association.rf.memory_s": "a fix that credits no object is kept for track.max_coast_s",
+    "association.rf.tau_s": "RF support decays with track.max_coast_s as its time constant, "
+    "and a fix that credits no object is kept that long",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
     "multi.early_birth_age_s": "a strong object moving at association.stationary.speed_mps or "

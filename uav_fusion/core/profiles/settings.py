@@ -54,6 +54,8 @@ class ScoreConfig:
     large_rcs_dbsm: float = 0.0  # a small UAV's RCS is below 1 m^2 (the paper: up to -2.6 dBsm)
     large_rcs_weight: float = 5.0
     rf_weight: float = 1.0
+    # RF support's time constant and a fix's wait for an object: a profile sets it to its
+    # track.max_coast_s (Profile; infinite without one), not a key of its own
     rf_tau_s: float = 30.0
     rf_max: float = 3.0
     rf_window_s: float = 3.0
