@@ -294,6 +294,8 @@ def _tracker_doc() -> dict[str, Any]:
          r"association\.class\.tau_s needs 'estimator: tracker' or 'multi'"),
         (lambda d: (d.update(estimator="paper"), d.pop("association")),
          r"gating\.far_gate_m needs 'estimator: tracker' or 'multi'"),
+        (lambda d: d["track"].update(max_coast_s=None),
+         r"track\.max_coast_s is needed by 'estimator: tracker': it is also how long RF"),
     ],
 )
 def test_bad_profiles_name_the_file_and_the_key(

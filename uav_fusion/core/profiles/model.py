@@ -110,7 +110,8 @@ class Profile:
     source: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
-        # the trackers' RF evidence lasts as long as a track may coast (schema.DERIVED)
+        # the trackers' RF evidence lasts as long as a track may coast (schema.DERIVED; a
+        # tracker profile must set max_coast_s, the paper's estimator reads no RF support)
         tau = math.inf if self.max_coast_s is None else float(self.max_coast_s)
         if self.score.rf_tau_s != tau:
             object.__setattr__(self, "score", replace(self.score, rf_tau_s=tau))
@@ -362,6 +363,12 @@ def _validate(p: Profile, where: str, origin: Mapping[str, str] | None = None) -
         raise ConfigError(
             f"{where}: measurement.rf.R is needed (by the paper's estimator, the fixed RF "
             "model, and the CEP model without max_cep_m: a fix without a CEP)"
+        )
+    if p.uses_tracker and p.max_coast_s is None:
+        raise ConfigError(
+            f"{origin.get('track.max_coast_s', where)}: track.max_coast_s is needed by "
+            f"'estimator: {p.estimator}': it is also how long RF evidence lasts (an object's "
+            "RF support, a fix waiting for an object)"
         )
     if p.radar_model == "polar" and p.radar_sigma_range_m + p.radar_floor_m <= 0:
         raise ConfigError(

@@ -224,8 +224,8 @@ _TRACK = _group(
        "accepted for this long (a few RF intervals); the trackers' RF evidence lasts as "
        "long: an object's RF support decays with this time constant, and a fix that credits "
        "no object is kept this long for a new object in its gate (a UAV on its pad before "
-       "the radar has a track on it)", unit="s", bounds="> 0", null="never (RF support does "
-       "not decay)"),
+       "the radar has a track on it)", unit="s", bounds="> 0", null="never (the paper's "
+       "estimator only)"),
 )
 _UPDATE = _group(
     "update", TRACKER,
@@ -380,10 +380,10 @@ KEYS: tuple[Key, ...] = (
 )
 BY_PATH: dict[str, Key] = {k.path: k for k in KEYS}
 
-#: Keys that have left the schema, with what a profile that still sets one should do.
 #: Attributes a profile derives from another key instead of reading a key of their own.
 DERIVED: dict[str, str] = {"score.rf_tau_s": "track.max_coast_s"}
 
+#: Keys that have left the schema, with what a profile that still sets one should do.
 RETIRED: dict[str, str] = {
     "update.vz_hold_after_s": "it is update.hold_after_s",
     "update.vz_hold_sigma_mps": "it is update.hold_sigma_mps",
