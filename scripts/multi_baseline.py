@@ -2,6 +2,11 @@
 
     python scripts/multi_baseline.py FLIGHT_FOLDER [...] [--profile tracker] [--grid-hz 1]
         [--radar-min-uav-prob P] [--jpda [--jpda-pd PD] [--jpda-max-hypotheses K]]
+    python scripts/multi_baseline.py --split test [--definition multi] [--cache DIR] [...]
+
+``--split`` takes the flights of that half of a benchmark definition from the cache, as
+``uav_fusion bench`` names them for the current twin (a cache may also hold the folders of
+older twin versions, which a glob would pick up too).
 
 For every flight, the multi-UAV tracker (:func:`uav_fusion.core.estimators.multi.run_multi`)
 and the Stone Soup baseline (:func:`run_stonesoup`) run over the same time-ordered radar
@@ -110,6 +115,8 @@ from stonesoup.types.track import Track
 from stonesoup.types.update import Update
 from stonesoup.updater.kalman import KalmanUpdater
 
+from uav_fusion.core.bench.cache import cached_flights
+from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import Profile, load_profile
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
@@ -125,6 +132,7 @@ from uav_fusion.core.records import Flight, RadarFrame, RfAttempt
 from uav_fusion.core.scoring.gospa import MultiScoreSettings, UavTruth, pool, score_flight
 from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.site import Site, load_site
+from uav_fusion.resources import DEFAULT_SITE, config_path
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -617,9 +625,36 @@ def print_table(rows: Sequence[dict[str, Any]]) -> None:
         )
 
 
+def split_folders(ap: argparse.ArgumentParser, args: argparse.Namespace) -> list[Path]:
+    """The cache folders of ``args.split`` of ``args.definition`` for the current twin; an
+    error naming the first that is missing (not generated yet)."""
+    site_file = Path(args.site) if args.site else config_path(DEFAULT_SITE)
+    flights = cached_flights(load_definition(args.definition), args.split, args.cache, site_file)
+    missing = [cf.folder for cf in flights if not cf.folder.is_dir()]
+    if missing:
+        ap.error(
+            f"{missing[0]}: not in the cache ({len(missing)} of {len(flights)} flights of the "
+            f"{args.split} half missing); generate them with `uav_fusion bench --definition "
+            f"{args.definition} --split {args.split} --cache {args.cache}`"
+        )
+    return [cf.folder for cf in flights]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
-    ap.add_argument("folders", nargs="+", type=Path, help="flight folders")
+    ap.add_argument("folders", nargs="*", type=Path, help="flight folders (or --split)")
+    ap.add_argument(
+        "--split",
+        choices=("tune", "test"),
+        help="instead of folders: this half of --definition's flights, from --cache",
+    )
+    ap.add_argument("--definition", default="multi", help="with --split (default: multi)")
+    ap.add_argument(
+        "--cache",
+        type=Path,
+        default=Path("out/bench_cache"),
+        help="with --split: the flight cache (default: out/bench_cache)",
+    )
     ap.add_argument("--profile", default="tracker", help="tracker profile (default: tracker)")
     ap.add_argument("--grid-hz", type=float, default=1.0, help="output grid rate (default: 1)")
     ap.add_argument("--site", default=None, help="site YAML (default: the shipped site)")
@@ -670,6 +705,11 @@ def main(argv: list[str] | None = None) -> int:
     if not profile.uses_tracker:
         ap.error(f"{profile.name!r} is not a tracker profile (estimator: tracker)")
     site = load_site(args.site)
+    if args.split and args.folders:
+        ap.error("give flight folders or --split, not both")
+    folders = split_folders(ap, args) if args.split else list(args.folders)
+    if not folders:
+        ap.error("give flight folders or --split")
     rows = [
         compare(
             folder,
@@ -681,7 +721,7 @@ def main(argv: list[str] | None = None) -> int:
             args.range_gate_m,
             not args.strict_grounded,
         )
-        for folder in args.folders
+        for folder in folders
     ]
     print_table(rows)
     return 0

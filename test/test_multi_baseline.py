@@ -1,9 +1,12 @@
 """The Stone Soup multi-target baseline of scripts/multi_baseline.py: the same motion noise and
-measurement covariances as ours, and two confirmed tracks on two crossing UAVs."""
+measurement covariances as ours, two confirmed tracks on two crossing UAVs, and the flights
+``--split`` takes from a cache."""
 
 from __future__ import annotations
 
+import argparse
 from datetime import timedelta
+from pathlib import Path
 from types import ModuleType
 
 import numpy as np
@@ -11,6 +14,8 @@ import pytest
 from script_util import load_script
 from test_multi_tracker import Crossing
 
+from uav_fusion.core.bench.cache import cached_flights
+from uav_fusion.core.bench.definition import load_definition
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import cv_process_noise
@@ -23,6 +28,7 @@ from uav_fusion.core.estimators.parts import (
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import RadarCalibration, Site, load_site
+from uav_fusion.resources import DEFAULT_SITE, config_path
 
 pytest.importorskip("stonesoup")
 
@@ -203,3 +209,29 @@ def test_jpda_variant_tracks_both_uavs(mb: ModuleType, profile: Profile, site: S
         # shared detections may swap two ids where a UAV passes the reflector (t = 37 s)
         assert len(ep.tracks) == 3
         assert dist[0].min() < 50.0 and dist[1].min() < 50.0
+
+
+def test_split_takes_the_current_twins_cache_folders_only(
+    mb: ModuleType, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--split`` picks a half's flights as ``uav_fusion bench`` names them for the current
+    twin: a folder of an older twin beside them (what a glob would also pick up) is not
+    taken, and a flight not generated yet stops the script naming it."""
+    ap = argparse.ArgumentParser()
+    args = argparse.Namespace(split="test", definition="multi", cache=tmp_path, site=None)
+    with pytest.raises(SystemExit):
+        mb.split_folders(ap, args)
+    err = capsys.readouterr().err
+    assert "not in the cache (6 of 6 flights of the test half missing)" in err
+    assert str(tmp_path / "multi_crossing_pair-s201-") in err
+    site_file = config_path(DEFAULT_SITE)
+    current = [
+        cf.folder for cf in cached_flights(load_definition("multi"), "test", tmp_path, site_file)
+    ]
+    for folder in current:
+        folder.mkdir()
+    (tmp_path / "multi_crossing_pair-s201-0123456789abcdef").mkdir()  # an older twin's
+    assert mb.split_folders(ap, args) == current
+    with pytest.raises(SystemExit):
+        mb.main([str(current[0]), "--split", "test", "--cache", str(tmp_path)])
+    assert "give flight folders or --split, not both" in capsys.readouterr().err
