@@ -217,7 +217,8 @@ def test_tracker_with_adaptive_noise_runs_a_flight_and_reports_its_sigmas(
     assert int(status["radar_allowance_checks"]) > 5
     f0 = math.radians(prof.radar_sigma_az_deg) * prof.range_gate_m
     allowance = float(status["radar_allowance_m"])
-    assert f0 / 2.0 <= allowance <= 2.0 * f0
+    # within its bounds (the status rounds to 0.01 m; on this flight it ends at the lower one)
+    assert f0 / 2.0 - 0.01 <= allowance <= 2.0 * f0 + 0.01
     assert allowance != pytest.approx(f0, rel=1e-3)  # the RF fixes moved it
     sig_az = float(status["radar_sigma_az_deg"])
     assert prof.radar_sigma_az_deg <= sig_az <= 2.0 * prof.radar_sigma_az_deg

@@ -72,6 +72,9 @@ RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_m
 RETUNED: dict[str, dict[str, Any]] = {
     "tracker": {
         "score.class_tau_s": 5.0,
+        # the radar's datasheet angle accuracy (+-2 deg) in place of fitted sigmas
+        "radar_sigma_az_deg": 2.0,
+        "radar_sigma_el_deg": 2.0,
         "score.rf_tau_s": 20.0,  # its track.max_coast_s
         "max_consecutive_rejections": None,
         # the fitted fallback matrices went: the polar model gives every report its R, and a

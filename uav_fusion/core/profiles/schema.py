@@ -142,11 +142,10 @@ _MEASUREMENT = (
            choices=("fixed", "polar")),
         _k("sigma_range_m", "radar_sigma_range_m", NUMBER, FITTED, "polar model: range "
            "standard deviation", unit="m", bounds=">= 0", fit=CALIBRATE),
-        _k("sigma_az_deg", "radar_sigma_az_deg", NUMBER, FITTED, "polar model: azimuth "
-           "standard deviation", unit="deg", bounds=">= 0", fit=CALIBRATE),
-        _k("sigma_el_deg", "radar_sigma_el_deg", NUMBER, FITTED, "polar model: elevation "
-           "standard deviation (above the per-report value: errors correlate over seconds)",
-           unit="deg", bounds=">= 0", fit=f"{CALIBRATE}; {TUNED}"),
+        _k("sigma_az_deg", "radar_sigma_az_deg", NUMBER, SPEC, "polar model: azimuth "
+           "standard deviation (the radar's datasheet angle accuracy)", unit="deg", bounds=">= 0"),
+        _k("sigma_el_deg", "radar_sigma_el_deg", NUMBER, SPEC, "polar model: elevation "
+           "standard deviation (as sigma_az_deg)", unit="deg", bounds=">= 0"),
         _k("floor_m", "radar_floor_m", NUMBER, FITTED, "polar model: standard deviation added "
            "on each axis (successive reports' errors are correlated)", unit="m",
            bounds=">= 0", fit=TUNED),
