@@ -51,9 +51,11 @@ where it belongs), and a value of the wrong type or outside its bounds stop with
 and the key named. Values not given keep the default shown. A sweep
 (`uav_fusion sweep`, docs/benchmark.md) varies keys by the same paths.
 
-**Basis** of a value: `spec` (a sensor's specification), `physical` (a physical limit),
-`fitted` (fitted on flights, by the command named; "tune half": compared on the benchmark's
-tune flights) or `design` (a component choice or a design rule). **Used by**: the
+**Basis** of the `tracker` profile's value (the `paper` profile's are the paper's):
+`spec` (a sensor's specification), `physical` (a physical limit), `fitted` (fitted on
+flights, by the command named; "tune half": compared on the benchmark's tune flights; the
+measurements behind each are in docs/estimator.md) or `design` (a component choice or a
+design rule). **Used by**: the
 estimators that read the key (the paper's estimator ignores tracker keys). The `paper` and
 `tracker` columns give the shipped profiles' values (`tracker_smoothed` is `tracker` with
 `smoother.lag_s: 3`).

@@ -184,11 +184,11 @@ _ADAPTIVE = _group(
 )
 _GATING = _group(
     "gating", ALL,
-    _k("range_gate_m", "range_gate_m", NUMBER, DESIGN, "radar reports farther from the radar "
+    _k("range_gate_m", "range_gate_m", NUMBER, FITTED, "radar reports farther from the radar "
        "are discarded (trackers: updated in 3D out to here)", unit="m", bounds="> 0",
-       null="the site's radar.range_gate_m"),
-    _k("nis_probability", "nis_probability", NUMBER, DESIGN, "chi-square probability of the "
-       "NIS gate", bounds="(0, 1)"),
+       null="the site's radar.range_gate_m", fit=TUNED),
+    _k("nis_probability", "nis_probability", NUMBER, FITTED, "chi-square probability of the "
+       "NIS gate", bounds="(0, 1)", fit="uav_fusion sweep bench/sweep_q.yaml (tune half)"),
     _k("min_uav_prob", "min_uav_prob", NUMBER, DESIGN, "radar reports with a lower (or no) UAV "
        "class probability are discarded", bounds="[0, 1]", null="no threshold"),
     _k("far_gate_m", "far_gate_m", NUMBER, FITTED, "radar reports between range_gate_m "
@@ -219,12 +219,12 @@ _TRACK = _group(
        "speed)", unit="m/s", bounds="> 0"),
     _k("max_consecutive_rejections", "max_consecutive_rejections", INTEGER, DESIGN, "the track "
        "restarts after this many NIS rejections in a row", bounds=">= 1", null="never"),
-    _k("max_coast_s", "max_coast_s", NUMBER, DESIGN, "the track restarts when nothing was "
+    _k("max_coast_s", "max_coast_s", NUMBER, FITTED, "the track restarts when nothing was "
        "accepted for this long (a few RF intervals); the trackers' RF evidence lasts as "
        "long: an object's RF support decays with this time constant, and a fix that credits "
        "no object is kept this long for a new object in its gate (a UAV on its pad before "
        "the radar has a track on it)", unit="s", bounds="> 0", null="never (the paper's "
-       "estimator only)"),
+       "estimator only)", fit=TUNED),
 )
 _UPDATE = _group(
     "update", TRACKER,
@@ -233,14 +233,15 @@ _UPDATE = _group(
        choices=("none", "student_t", "huber")),
     _k("dof", "robust_dof", NUMBER, DESIGN, "student_t: degrees of freedom", bounds="> 0"),
     _k("huber_k", "robust_huber_k", NUMBER, DESIGN, "huber: threshold", bounds="> 0"),
-    _k("hold_after_s", "hold_after_s", NUMBER, DESIGN, "without a radar update for this long, "
+    _k("hold_after_s", "hold_after_s", NUMBER, FITTED, "without a radar update for this long, "
        "pseudo-measurements hold what the radar no longer measures: each RF fix first applies "
        "climb rate = 0 (2D fixes cannot see it), and, for the single-UAV tracker inside the 3D "
        "range gate, each radar frame applies radial speed = 0 (the radar would see the UAV "
-       "there unless it hovers in the Doppler notch)", unit="s", bounds=">= 0", null="never"),
-    _k("hold_sigma_mps", "hold_sigma_mps", NUMBER, DESIGN, "standard deviation of those "
+       "there unless it hovers in the Doppler notch)", unit="s", bounds=">= 0", null="never",
+       fit=TUNED),
+    _k("hold_sigma_mps", "hold_sigma_mps", NUMBER, FITTED, "standard deviation of those "
        "pseudo-measurements, and of the climb rate a track starts with (tracks start level)",
-       unit="m/s", bounds="> 0"),
+       unit="m/s", bounds="> 0", fit=TUNED),
 )
 _ASSOCIATION = (
     *_group("association.class", TRACKER,
