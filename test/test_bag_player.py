@@ -316,6 +316,46 @@ def test_without_subscribers_it_waits_then_plays_anyway(ros: None, tmp_path: Pat
     assert player.played == Counter({"/a": 2}) and s.got == []
 
 
+def test_hold_makes_the_player_wait_for_its_consumers_then_keep_the_spacing(
+    ros: None, tmp_path: Path
+) -> None:
+    """An in-process owner's ``hold`` (its consumers behind): nothing is published while it
+    holds, and after it the rest of the bag keeps its spacing instead of bursting out."""
+    bag = make_bag(tmp_path / "b", OFFSETS)
+    s = sink({"/a": PointStamped})
+    player = BagPlayer(str(bag), parameter_overrides=[Parameter("rate", value=1.0)])
+    released = threading.Event()
+    player.hold = lambda: len(s.got) >= 3 and not released.is_set()
+    ex = SingleThreadedExecutor()
+    ex.add_node(s.node)
+    ex.add_node(player)
+    player.start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while len(s.got) < 3 and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.02)
+        assert len(s.got) == 3
+        # held for longer than the rest of the bag lasts: nothing more is published
+        end = time.monotonic() + 1.2
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.02)
+        assert player.played["/a"] == 3 and len(s.got) == 3
+        t_release = time.monotonic()
+        released.set()
+        deadline = time.monotonic() + 30.0
+        while len(s.got) < len(OFFSETS) and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.02)
+    finally:
+        player.stop()
+        ex.shutdown()
+        player.destroy_node()
+        s.node.destroy_node()
+    assert [d for _, _, d in s.got] == [point(i) for i in range(len(OFFSETS))]
+    # the schedule moved by the wait: the last message comes the rest of the bag's time after
+    # the release (without the move, every remaining message was overdue and burst out)
+    assert s.got[-1][1] - t_release >= 0.9 * (OFFSETS[-1] - OFFSETS[3])
+
+
 @pytest.mark.processes
 def test_ctrl_c_stops_cleanly_and_reports_what_was_played(tmp_path: Path) -> None:
     import signal

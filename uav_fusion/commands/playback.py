@@ -32,6 +32,9 @@ RECORDED_TOPICS = (
 )
 TO_FUSION = ("/radar/pose", "/rf/fix")
 TO_EVALUATOR = ("/radar/raw", "/rf/fix", "/truth/fix")
+#: messages the fusion node may lag the player by before the player waits (a tenth of the
+#: streams' queue depth)
+BACKLOG = 100
 
 
 class _BagGraph:
@@ -66,6 +69,10 @@ class _BagGraph:
             bag=args.bag, context=ctx, parameter_overrides=[Parameter("rate", value=self.rate)]
         )
         self.nodes.append(self.player)
+        # backpressure: the nodes share this process, so the player waits while a node is
+        # more than BACKLOG messages behind (on a loaded machine a high rate would otherwise
+        # overflow the reliable queues and lose messages)
+        self.player.hold = lambda: max(self._backlog()) > BACKLOG
         self.recorder: BagRecorder | None = None
         if args.record:
             self.recorder = BagRecorder(
@@ -101,24 +108,42 @@ class _BagGraph:
 
     def play(self) -> bool:
         """Play the bag to the end; True when every message reached the nodes (and recorder)."""
-        fusion, evaluator, played = self.fusion, self.evaluator, self.player.played
+        fusion = self.fusion
         self.player.start()
         ok = self.spin_until(
-            lambda: (
-                self.player.finished.is_set()
-                and sum(fusion.received.values()) >= sum(played[t] for t in TO_FUSION)
-            )
+            lambda: self.player.finished.is_set() and self._backlog()[0] <= 0
         )
         fusion.flush()
         fusion.output.publish_views(force=True)  # the final path and markers
-        expected = sum(played.get(t, 0) for t in TO_EVALUATOR)
-        ok = ok and self.spin_until(
-            lambda: (
-                sum(evaluator.received.values())
-                >= expected + fusion.output.steps_published + fusion.output.accepted_published
-            )
-        )
+        ok = ok and self.spin_until(lambda: self._backlog()[1] <= 0)
         return ok and self._recorded()
+
+    def _due(self) -> tuple[int, int]:
+        """Messages due so far at the fusion node and at the evaluator node."""
+        fusion, played = self.fusion, self.player.played
+        return (
+            sum(played[t] for t in TO_FUSION),
+            sum(played[t] for t in TO_EVALUATOR)
+            + fusion.output.steps_published
+            + fusion.output.accepted_published,
+        )
+
+    def _backlog(self) -> tuple[int, int]:
+        """Messages due but not yet received, at the fusion and the evaluator node."""
+        due_f, due_e = self._due()
+        return (
+            due_f - sum(self.fusion.received.values()),
+            due_e - sum(self.evaluator.received.values()),
+        )
+
+    def shortfall(self) -> str:
+        """What each node received against what it was due (for the error message)."""
+        due_f, due_e = self._due()
+        text = (
+            f"fusion_node {sum(self.fusion.received.values())} of {due_f}, evaluator_node "
+            f"{sum(self.evaluator.received.values())} of {due_e}"
+        )
+        return text + ("" if self.player.finished.is_set() else "; the bag was not played out")
 
     def _recorded(self) -> bool:
         """Wait until every step and accepted measurement published is in the bag, close it."""
@@ -160,7 +185,10 @@ def run_bag(args: argparse.Namespace, overrides: dict[str, Any]) -> Any:
             print(f"demo: bag_player: {graph.player.error}", file=sys.stderr)
             return None
         if not ok:
-            print("demo: not every message of the bag arrived", file=sys.stderr)
+            print(
+                f"demo: not every message of the bag arrived ({graph.shortfall()})",
+                file=sys.stderr,
+            )
             return None
         wall = time.monotonic() - t0
         live = graph.evaluator.evaluate()

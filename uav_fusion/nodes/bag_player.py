@@ -17,7 +17,7 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import rclpy
@@ -123,6 +123,9 @@ class BagPlayer(Node):
         self.start_ns = start
         self.end_ns = start + int(dur * 1e9) if dur > 0 else None
         self.played: Counter[str] = Counter()
+        #: set by an in-process owner: while it returns True the player waits before the next
+        #: message (its consumers have fallen behind; the bag's spacing resumes after the wait)
+        self.hold: Callable[[], bool] | None = None
         self.passes = 0
         self.finished = threading.Event()
         self._stop = threading.Event()
@@ -295,6 +298,14 @@ class BagPlayer(Node):
                         self._publish_clock(bag0 + int((now - wall0) * self.rate * 1e9))
                 if self._stop.is_set():
                     break  # stopped while waiting: this message is not due yet
+                hold = self.hold
+                if hold is not None and hold():
+                    t_hold = time.monotonic()
+                    while hold() and not self._stop.is_set():
+                        time.sleep(0.005)
+                    wall0 += time.monotonic() - t_hold  # the schedule moves by the wait
+                    if self._stop.is_set():
+                        break
                 self._publish_clock(msg.timestamp_ns)
                 self._pubs[msg.topic].publish(msg.data)
                 self.played[self._out[msg.topic]] += 1
