@@ -46,7 +46,9 @@ def test_registration_recovers_a_half_degree_mount_misalignment(site: Site, seed
     reg = tr.front.registration
     assert reg.used > 80 and reg.refused == 0  # about one fix every 4 s
     assert abs(reg.az_deg - 0.5) < 0.1
-    assert reg.sigma_deg < 0.1  # and it knows it: the bound of 96 fixes
+    # and it knows it: about 0.1 degree from ~96 fixes and the radar's 2-degree reports,
+    # and the error lies within two of its sigmas
+    assert reg.sigma_deg < 0.12 and abs(reg.az_deg - 0.5) < 2.0 * reg.sigma_deg
     # the correction follows the estimate, and /diagnostics shows it
     assert tr.front.align is not None and tr.front.align.az_bias_deg == reg.az_deg
     status = tr.status()
