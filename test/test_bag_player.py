@@ -356,6 +356,42 @@ def test_hold_makes_the_player_wait_for_its_consumers_then_keep_the_spacing(
     assert s.got[-1][1] - t_release >= 0.9 * (OFFSETS[-1] - OFFSETS[3])
 
 
+def test_a_hold_that_never_ends_delays_each_message_by_at_most_its_limit(
+    ros: None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A consumer that lost messages never catches up: the player gives up each wait after
+    HOLD_MAX_S and plays the bag out."""
+    import uav_fusion.nodes.bag_player as bp
+
+    monkeypatch.setattr(bp, "HOLD_MAX_S", 0.1)
+    bag = make_bag(tmp_path / "b", [0.0, 0.01, 0.02, 0.03])
+    s = sink({"/a": PointStamped})
+    holds: list[float] = []
+
+    def hold() -> bool:
+        holds.append(time.monotonic())
+        return True
+
+    player = BagPlayer(str(bag), parameter_overrides=[Parameter("rate", value=1.0)])
+    player.hold = hold
+    ex = SingleThreadedExecutor()
+    ex.add_node(s.node)
+    ex.add_node(player)
+    player.start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while (len(s.got) < 4 or not player.finished.is_set()) and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.02)
+    finally:
+        player.stop()
+        ex.shutdown()
+        player.destroy_node()
+        s.node.destroy_node()
+    assert player.played["/a"] == 4 and len(s.got) == 4
+    # every message was held back for its limit first
+    assert s.got[-1][1] - holds[0] >= 4 * 0.1
+
+
 @pytest.mark.processes
 def test_ctrl_c_stops_cleanly_and_reports_what_was_played(tmp_path: Path) -> None:
     import signal

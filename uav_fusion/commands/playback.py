@@ -32,8 +32,8 @@ RECORDED_TOPICS = (
 )
 TO_FUSION = ("/radar/pose", "/rf/fix")
 TO_EVALUATOR = ("/radar/raw", "/rf/fix", "/truth/fix")
-#: messages the fusion node may lag the player by before the player waits (a tenth of the
-#: streams' queue depth)
+#: messages the fusion or the evaluator node may lag behind before the player waits (a tenth
+#: of the streams' queue depth)
 BACKLOG = 100
 
 

@@ -66,6 +66,10 @@ def _desc(text: str, kind: int) -> ParameterDescriptor:
     return ParameterDescriptor(description=text, type=kind)
 
 
+#: The longest one wait for :attr:`BagPlayer.hold` lasts (s).
+HOLD_MAX_S = 5.0
+
+
 class BagPlayer(Node):
     """Publishes a bag's messages with recorded spacing divided by ``rate``.
 
@@ -124,7 +128,8 @@ class BagPlayer(Node):
         self.end_ns = start + int(dur * 1e9) if dur > 0 else None
         self.played: Counter[str] = Counter()
         #: set by an in-process owner: while it returns True the player waits before the next
-        #: message (its consumers have fallen behind; the bag's spacing resumes after the wait)
+        #: message (its consumers have fallen behind; the bag's spacing resumes after the
+        #: wait), at most HOLD_MAX_S at a time (a consumer that lost messages never catches up)
         self.hold: Callable[[], bool] | None = None
         self.passes = 0
         self.finished = threading.Event()
@@ -301,7 +306,8 @@ class BagPlayer(Node):
                 hold = self.hold
                 if hold is not None and hold():
                     t_hold = time.monotonic()
-                    while hold() and not self._stop.is_set():
+                    give_up = t_hold + HOLD_MAX_S
+                    while hold() and not self._stop.is_set() and time.monotonic() < give_up:
                         time.sleep(0.005)
                     wall0 += time.monotonic() - t_hold  # the schedule moves by the wait
                     if self._stop.is_set():
