@@ -3,6 +3,7 @@ the real rosbag2 bags of shared/interop, unknown message types and bad input."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import subprocess
@@ -316,40 +317,49 @@ def test_without_subscribers_it_waits_then_plays_anyway(ros: None, tmp_path: Pat
     assert player.played == Counter({"/a": 2}) and s.got == []
 
 
-def test_hold_makes_the_player_wait_for_its_consumers_then_keep_the_spacing(
-    ros: None, tmp_path: Path
-) -> None:
-    """An in-process owner's ``hold`` (its consumers behind): nothing is published while it
-    holds, and after it the rest of the bag keeps its spacing instead of bursting out."""
-    bag = make_bag(tmp_path / "b", OFFSETS)
-    s = sink({"/a": PointStamped})
+@contextlib.contextmanager
+def held_player(s: Sink, bag: Path, hold: Any) -> Iterator[tuple[BagPlayer, Any]]:
+    """A player at rate 1 with ``hold``, running; yields it and ``spin(cond)``, which spins
+    the executor while ``cond()`` holds (30 s at most)."""
     player = BagPlayer(str(bag), parameter_overrides=[Parameter("rate", value=1.0)])
-    released = threading.Event()
-    player.hold = lambda: len(s.got) >= 3 and not released.is_set()
+    player.hold = hold
     ex = SingleThreadedExecutor()
     ex.add_node(s.node)
     ex.add_node(player)
+
+    def spin(cond: Any, limit_s: float = 30.0) -> None:
+        deadline = time.monotonic() + limit_s
+        while cond() and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.02)
+
     player.start()
     try:
-        deadline = time.monotonic() + 30.0
-        while len(s.got) < 3 and time.monotonic() < deadline:
-            ex.spin_once(timeout_sec=0.02)
-        assert len(s.got) == 3
-        # held for longer than the rest of the bag lasts: nothing more is published
-        end = time.monotonic() + 1.2
-        while time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.02)
-        assert player.played["/a"] == 3 and len(s.got) == 3
-        t_release = time.monotonic()
-        released.set()
-        deadline = time.monotonic() + 30.0
-        while len(s.got) < len(OFFSETS) and time.monotonic() < deadline:
-            ex.spin_once(timeout_sec=0.02)
+        yield player, spin
     finally:
         player.stop()
         ex.shutdown()
         player.destroy_node()
         s.node.destroy_node()
+
+
+def test_hold_makes_the_player_wait_for_its_consumers_then_keep_the_spacing(
+    ros: None, tmp_path: Path
+) -> None:
+    """An in-process owner's ``hold`` (its consumers behind): nothing is published while it
+    holds, and after it the rest of the bag keeps its spacing instead of bursting out."""
+    s = sink({"/a": PointStamped})
+    released = threading.Event()
+    with held_player(
+        s, make_bag(tmp_path / "b", OFFSETS), lambda: len(s.got) >= 3 and not released.is_set()
+    ) as (player, spin):
+        spin(lambda: len(s.got) < 3)
+        assert len(s.got) == 3
+        # held for longer than the rest of the bag lasts: nothing more is published
+        spin(lambda: True, limit_s=1.2)
+        assert player.played["/a"] == 3 and len(s.got) == 3
+        t_release = time.monotonic()
+        released.set()
+        spin(lambda: len(s.got) < len(OFFSETS))
     assert [d for _, _, d in s.got] == [point(i) for i in range(len(OFFSETS))]
     # the schedule moved by the wait: the last message comes the rest of the bag's time after
     # the release (without the move, every remaining message was overdue and burst out)
@@ -364,7 +374,6 @@ def test_a_hold_that_never_ends_delays_each_message_by_at_most_its_limit(
     import uav_fusion.nodes.bag_player as bp
 
     monkeypatch.setattr(bp, "HOLD_MAX_S", 0.1)
-    bag = make_bag(tmp_path / "b", [0.0, 0.01, 0.02, 0.03])
     s = sink({"/a": PointStamped})
     holds: list[float] = []
 
@@ -372,21 +381,9 @@ def test_a_hold_that_never_ends_delays_each_message_by_at_most_its_limit(
         holds.append(time.monotonic())
         return True
 
-    player = BagPlayer(str(bag), parameter_overrides=[Parameter("rate", value=1.0)])
-    player.hold = hold
-    ex = SingleThreadedExecutor()
-    ex.add_node(s.node)
-    ex.add_node(player)
-    player.start()
-    try:
-        deadline = time.monotonic() + 30.0
-        while (len(s.got) < 4 or not player.finished.is_set()) and time.monotonic() < deadline:
-            ex.spin_once(timeout_sec=0.02)
-    finally:
-        player.stop()
-        ex.shutdown()
-        player.destroy_node()
-        s.node.destroy_node()
+    bag = make_bag(tmp_path / "b", [0.0, 0.01, 0.02, 0.03])
+    with held_player(s, bag, hold) as (player, spin):
+        spin(lambda: len(s.got) < 4 or not player.finished.is_set())
     assert player.played["/a"] == 4 and len(s.got) == 4
     # every message was held back for its limit first
     assert s.got[-1][1] - holds[0] >= 4 * 0.1
