@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
 from test_graph_flight import write_flight
 
+from uav_fusion.bag.reader import BagReader
 from uav_fusion.cli import main
 
 
@@ -41,3 +43,12 @@ def test_demo_from_a_bag_equals_the_offline_run(
     assert code == 0, text
     assert (out / "report.md").is_file()
     assert "equals the offline run's" in text
+    # it plays what the graph's nodes take (the paper's filter: radar/pose + rf/fix; the
+    # evaluator: radar/raw, rf/fix, truth/fix), not the trackers' radar/tracks and rf/fixes,
+    # which nothing would subscribe to
+    topics = BagReader(bag).topics
+    taken = ("/radar/pose", "/radar/raw", "/rf/fix", "/truth/fix")
+    assert "/radar/tracks" in topics and "/rf/fixes" in topics
+    played = re.search(r"demo: (\d+) messages played", text)
+    assert played is not None, text
+    assert int(played.group(1)) == sum(topics[t].count for t in taken)

@@ -30,7 +30,6 @@ RECORDED_TOPICS = (
     "truth/fix",
     "/diagnostics",
 )
-TO_FUSION = ("/radar/pose", "/rf/fix")
 TO_EVALUATOR = ("/radar/raw", "/rf/fix", "/truth/fix")
 #: messages the fusion or the evaluator node may lag behind before the player waits (a tenth
 #: of the streams' queue depth)
@@ -65,8 +64,20 @@ class _BagGraph:
         self.nodes.append(self.fusion)
         self.evaluator = EvaluatorNode(context=ctx, parameter_overrides=params("evaluator_node"))
         self.nodes.append(self.evaluator)
+        # the fusion node's inputs depend on its profile (radar/pose + rf/fix for the paper's
+        # filter, radar/tracks + rf/fixes for the trackers); the player plays what some node
+        # of this graph takes, so it does not wait for subscribers to the rest
+        self.to_fusion = self.fusion.input_topics
+        played = {*self.to_fusion, *TO_EVALUATOR}
+        if args.record:
+            played |= {"/" + t for t in RECORDED_TOPICS if not t.startswith(("fusion/", "/"))}
         self.player = BagPlayer(
-            bag=args.bag, context=ctx, parameter_overrides=[Parameter("rate", value=self.rate)]
+            bag=args.bag,
+            context=ctx,
+            parameter_overrides=[
+                Parameter("rate", value=self.rate),
+                Parameter("topics", value=sorted(played)),
+            ],
         )
         self.nodes.append(self.player)
         # backpressure: the nodes share this process, so the player waits while a node is
@@ -122,7 +133,7 @@ class _BagGraph:
         """Messages due so far at the fusion node and at the evaluator node."""
         fusion, played = self.fusion, self.player.played
         return (
-            sum(played[t] for t in TO_FUSION),
+            sum(played[t] for t in self.to_fusion),
             sum(played[t] for t in TO_EVALUATOR)
             + fusion.output.steps_published
             + fusion.output.accepted_published,

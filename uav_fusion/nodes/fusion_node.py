@@ -274,6 +274,12 @@ class FusionNode(Node):
         )
 
     # --- what tests and tools read --------------------------------------------------------
+
+    @property
+    def input_topics(self) -> tuple[str, str]:
+        """The radar and RF topics the node subscribes to, resolved (``/radar/pose``, ...)."""
+        return self._sub_radar.topic_name, self._sub_rf.topic_name
+
     @property
     def received(self) -> Counter[str]:
         """Messages received per source."""
