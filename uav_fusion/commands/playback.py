@@ -15,6 +15,7 @@ from typing import Any
 # What ``demo --bag --record`` records: the fusion node's outputs and views, and the inputs
 # (so the recording alone opens in Foxglove / RViz with config/foxglove_layout.json and
 # config/uav_fusion.rviz; docs/views.md).
+RECORDED_INPUTS = ("radar/pose", "radar/raw", "rf/fix", "truth/fix")
 RECORDED_TOPICS = (
     "fusion/odom",
     "fusion/odom/updated",
@@ -24,10 +25,7 @@ RECORDED_TOPICS = (
     "fusion/path",
     "fusion/markers",
     "fusion/fix",
-    "radar/pose",
-    "radar/raw",
-    "rf/fix",
-    "truth/fix",
+    *RECORDED_INPUTS,
     "/diagnostics",
 )
 TO_EVALUATOR = ("/radar/raw", "/rf/fix", "/truth/fix")
@@ -70,7 +68,7 @@ class _BagGraph:
         self.to_fusion = self.fusion.input_topics
         played = {*self.to_fusion, *TO_EVALUATOR}
         if args.record:
-            played |= {"/" + t for t in RECORDED_TOPICS if not t.startswith(("fusion/", "/"))}
+            played |= {"/" + t for t in RECORDED_INPUTS}
         self.player = BagPlayer(
             bag=args.bag,
             context=ctx,

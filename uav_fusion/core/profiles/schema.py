@@ -383,6 +383,10 @@ BY_PATH: dict[str, Key] = {k.path: k for k in KEYS}
 #: Attributes a profile derives from another key instead of reading a key of their own.
 DERIVED: dict[str, str] = {"score.rf_tau_s": "track.max_coast_s"}
 
+_EARLY_BIRTH = (
+    "a strong object moving at association.stationary.speed_mps or more starts a track from "
+    "the age association.class.tau_s"
+)
 #: Keys that have left the schema, with what a profile that still sets one should do.
 RETIRED: dict[str, str] = {
     "update.vz_hold_after_s": "it is update.hold_after_s",
@@ -412,10 +416,8 @@ RETIRED: dict[str, str] = {
     "and a fix that credits no object is kept that long",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
-    "multi.early_birth_age_s": "a strong object moving at association.stationary.speed_mps or "
-    "more starts a track from the age association.class.tau_s",
-    "multi.early_birth_speed_mps": "a strong object moving at association.stationary.speed_mps "
-    "or more starts a track from the age association.class.tau_s",
+    "multi.early_birth_age_s": _EARLY_BIRTH,
+    "multi.early_birth_speed_mps": _EARLY_BIRTH,
 }
 
 
