@@ -268,8 +268,12 @@ def test_emitter_rejects_going_back_and_emits_on_advance() -> None:
     assert [s.published for s in out] == [True, True, False]  # ages 0.05, 0.15, 0.25
     with pytest.raises(ValueError, match="older"):
         em.feed(TrackSnapshot.none(T0))
-    with pytest.raises(ValueError, match="emitted grid"):
-        em.feed(TrackSnapshot.none(T0 + 0.3))
+    # a snapshot behind the emitted epochs (the output was moved on ahead of the input):
+    # nothing is emitted again, and it is the state of the next epochs
+    x = np.array([5.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    assert em.feed(TrackSnapshot(T0 + 0.25, x, np.eye(6), T0 + 0.25, True, 0)) == []
+    (nxt,) = em.advance(T0 + 0.4)
+    assert nxt.t == T0 + 0.4 and nxt.x[0] == pytest.approx(5.15) and nxt.published
 
 
 def test_run_command_writes_the_grid(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

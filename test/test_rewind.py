@@ -3,8 +3,10 @@ re-filtering give exactly the in-order track, for every estimator."""
 
 from __future__ import annotations
 
+import math
 import random
 from dataclasses import replace
+from typing import Any
 
 import pytest
 
@@ -12,6 +14,7 @@ from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile, make_estimator
 from uav_fusion.core.estimators.base import drive
 from uav_fusion.core.live.rewind import Rewinder, simulate
+from uav_fusion.core.live.schedule import CLOCK, ClockTick
 from uav_fusion.core.records import RADAR, RF, RadarFrame, RfAttempt
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
@@ -104,3 +107,36 @@ def test_a_second_message_of_a_fused_radar_stamp_joins_its_frame(flight) -> None
         for trk in f.tracks:
             rw.fuse(RADAR, f.t, RadarFrame(f.t, (trk,), f.line))
     assert [_key(s) for s in rw.steps] == [_key(s) for s in whole]
+
+
+def test_a_clock_move_that_publishes_nothing_changes_nothing(flight) -> None:  # type: ignore[no-untyped-def]
+    """The fusion node's clock moves the fixed-rate output on between inputs, and its arrival
+    schedule keeps only the moves that published an epoch. So a move that published none
+    must leave the estimator as it was: an input older than the move (an RF fix that came
+    late) is still the state of the epochs after it, and the schedule's replay publishes
+    exactly what the live run did."""
+    prof = load_profile("tracker")
+    site = load_site(None)
+    est = make_estimator(prof, site, 10.0, live=True)
+    items = [it for it in est.flight_input(flight) if it.t < flight.radar[0].t + SPAN_S]
+    rng = random.Random(5)
+    live: list[tuple[str, RadarFrame | RfAttempt | ClockTick]] = []
+    clock = -math.inf
+    for src, it in _arrivals(items, 1.5, 0.5, seed=11):
+        live.append((src, it))
+        clock = max(clock, it.t)  # the sensor time the clock follows: the newest stamp
+        for _ in range(2):  # the clock runs on between two inputs, at times past the next
+            clock += rng.uniform(0.0, 0.2)
+            live.append((CLOCK, ClockTick(clock)))
+
+    def make() -> Any:
+        return make_estimator(prof, site, 10.0, live=True)
+
+    outs, _, _ = simulate(make, live)
+    published = [(g.k, repr(g.x.tolist())) for o in outs for g in o.grid]
+    moved = zip(live, outs[:-1], strict=True)  # the last output: after the end
+    kept = [a for a, o in moved if not isinstance(a[1], ClockTick) or o.grid]
+    assert 0 < len(kept) - len(items) < len(live) - len(items)  # some moves published nothing
+    outs2, _, _ = simulate(make, kept)
+    replayed = [(g.k, repr(g.x.tolist())) for o in outs2 for g in o.grid]
+    assert replayed == published and len(published) > 2000

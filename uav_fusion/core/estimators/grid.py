@@ -257,7 +257,6 @@ class GridEmitter(EpochClock):
         self.max_coast_s = math.inf if max_coast_s is None else float(max_coast_s)
         self.predict = predict
         self._snap: TrackSnapshot | None = None
-        self._closed = -math.inf  # every epoch <= this has been emitted
 
     @property
     def snapshot(self) -> TrackSnapshot | None:
@@ -271,8 +270,8 @@ class GridEmitter(EpochClock):
             raise ValueError(f"snapshot time must be finite, got {t}")
         if self._snap is not None and t < self._snap.t:
             raise ValueError(f"snapshot at {t} is older than the last one ({self._snap.t})")
-        if t <= self._closed:
-            raise ValueError(f"snapshot at {t} is not after the emitted grid ({self._closed})")
+        # a snapshot at or before epochs already emitted (the output was moved on ahead of
+        # the input) emits nothing: it is the state of the epochs still to come
         out = [self.state_at(k) for k in self.take(t, inclusive=False)]
         self._snap = snap
         return out
@@ -280,9 +279,7 @@ class GridEmitter(EpochClock):
     def advance(self, t: float) -> list[GridState]:
         """Declare every time up to ``t`` processed: emits every epoch ``<= t``."""
         t = float(t)
-        out = [self.state_at(k) for k in self.take(t, inclusive=True)]
-        self._closed = max(self._closed, t)
-        return out
+        return [self.state_at(k) for k in self.take(t, inclusive=True)]
 
     def finish(self) -> list[GridState]:
         """Emit the remaining epochs up to ``t1`` (requires a finite ``t1``)."""
@@ -380,8 +377,9 @@ class StepGrid:
 
     def advance(self, t: float) -> list[GridState]:
         """Every step up to time ``t`` has been fed (e.g. a reorder buffer released everything
-        up to ``t``): emit the epochs ``<= t``. Live use: call after each release."""
-        self._last_t = max(self._last_t, float(t))
+        up to ``t``): emit the epochs ``<= t``. Live use: call after each release. A step
+        older than ``t`` may still come (a clock moved the output on ahead of the input): it
+        emits no epoch again, and is the state of the epochs after ``t``."""
         return self.emitter.advance(t)
 
     def finish(self) -> list[GridState]:
