@@ -64,6 +64,8 @@ MOVED = {
     "score.rf_memory_s": "track.max_coast_s (20 s for the tracker, 30 s before)",
     "multi.early_birth_age_s": "association.class.tau_s (5 s for the tracker, 4 s before)",
     "multi.early_birth_speed_mps": "association.stationary.speed_mps (1.5 m/s, 3 m/s before)",
+    "robust_dof": "a constant of the Student-t update (4 in all)",
+    "robust_huber_k": "gone with the huber update (no profile used it)",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}
@@ -229,9 +231,11 @@ def test_extends_merges_mappings_and_replaces_lists_and_values(tmp_path: Path) -
 
 
 def test_a_value_inherited_from_a_parent_is_blamed_on_the_parent(tmp_path: Path) -> None:
-    parent = _write(tmp_path / "parent.yaml", {"extends": "tracker", "update": {"dof": -1.0}})
+    parent = _write(
+        tmp_path / "parent.yaml", {"extends": "tracker", "update": {"hold_sigma_mps": -1.0}}
+    )
     child = _write(tmp_path / "child.yaml", {"extends": "./parent.yaml", "name": "c"})
-    with pytest.raises(ConfigError, match=f"^{parent}: update.dof must be a number > 0"):
+    with pytest.raises(ConfigError, match=f"^{parent}: update.hold_sigma_mps must be a number > 0"):
         load_profile(child)
 
 

@@ -4,11 +4,14 @@ transition check, M-of-N and deleter, and the CV / IMM filters against filterpy.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
+from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.imm import ImmFilter, packed_arrays
 from uav_fusion.core.estimators.kalman import CvFilter, pack_r
 from uav_fusion.core.estimators.models import (
@@ -23,13 +26,14 @@ from uav_fusion.core.estimators.parts import (
     CepRfR,
     Deleter,
     FixedRadarR,
-    HuberWeight,
     MofN,
+    NoRobust,
     PolarRadarR,
     RadarAlignment,
     StudentTWeight,
     object_start,
     packed_to_array,
+    robust_from_profile,
 )
 from uav_fusion.core.profiles.checks import validate_transition
 from uav_fusion.core.records import RadarFrame, RadarTrack
@@ -170,11 +174,19 @@ def test_student_t_weight_hand_cases() -> None:
     assert w.weight(100.0, 2) < w.weight(10.0, 2) < 1.0  # monotone: outliers count less
 
 
-def test_huber_weight_hand_cases() -> None:
-    w = HuberWeight(k=1.5)
-    assert w.weight(1.5**2, 3) == 1.0
-    assert w.weight(3.0**2, 3) == pytest.approx(0.5)  # k / d
-    assert w.weight(0.0, 2) == 1.0
+def test_the_robust_update_is_student_t_with_four_dof_or_none(tmp_path: Path) -> None:
+    assert robust_from_profile(load_profile("tracker")) == StudentTWeight(4.0)
+    assert isinstance(robust_from_profile(load_profile("paper")), NoRobust)
+    # a profile that still sets a retired key is told where it went, with its file
+    for key, text in (
+        ("dof", "the Student-t update has 4 degrees of freedom"),
+        ("huber_k", "gone with the huber update"),
+    ):
+        p = tmp_path / f"{key}.yaml"
+        p.write_text(f"name: p\nextends: tracker\nupdate:\n  {key}: 6.0\n", encoding="utf-8")
+        with pytest.raises(ConfigError, match=rf"{key}\.yaml.*'update\.{key}' is no longer") as e:
+            load_profile(str(p))
+        assert text in str(e.value)
 
 
 # --- transition matrix, M-of-N, deleter ---------------------------------------------------

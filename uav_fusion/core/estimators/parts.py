@@ -12,7 +12,7 @@ replaceable parts:
   and its UAV score); what a tracker then does with the reports (gates, association) is its
   own;
 - the RF measurement model (:class:`CepRfR` or :class:`FixedRfR`), the robust update weight
-  (:class:`StudentTWeight`, :class:`HuberWeight`, :class:`NoRobust`), the motion filter of a
+  (:class:`StudentTWeight`, :class:`NoRobust`), the motion filter of a
   new track (CV or IMM), the NIS gates, the :class:`Deleter` and M-of-N confirmation
   (:class:`MofN`): :class:`TrackParts`;
 - track starts from a radar object's own filter (:func:`object_start`) or an RF fix
@@ -260,6 +260,13 @@ class NoRobust:
         return 1.0
 
 
+#: The Student-t update's degrees of freedom: 4, the value Lange, Little and Taylor (1989,
+#: "Robust statistical modeling using the t distribution") recommend as a default. It is a
+#: constant: on the tune halves the update changes nothing measurable at any value, so there
+#: is nothing to fit it on, and it is a safeguard against outliers the gates let through.
+STUDENT_T_DOF = 4.0
+
+
 @dataclass(frozen=True)
 class StudentTWeight:
     """Student-t scale-mixture weight ``w = (nu + m) / (nu + NIS)`` (m: measurement dimension).
@@ -276,19 +283,6 @@ class StudentTWeight:
 
     def weight(self, nis: float, dim: int) -> float:
         return min(self.max_weight, (self.dof + dim) / (self.dof + nis))
-
-
-@dataclass(frozen=True)
-class HuberWeight:
-    """Huber weight on the Mahalanobis distance ``d = sqrt(NIS)``: 1 for ``d <= k``, ``k / d``
-    beyond (the M-estimator's influence is bounded)."""
-
-    k: float
-
-    def weight(self, nis: float, dim: int) -> float:
-        del dim
-        d = math.sqrt(nis) if nis > 0 else 0.0
-        return 1.0 if d <= self.k else self.k / d
 
 
 # --- IMM transition matrix ----------------------------------------------------------------
@@ -397,9 +391,7 @@ def rf_model_from_profile(profile: Profile) -> RfRModel:
 def robust_from_profile(profile: Profile) -> RobustWeight:
     """The robust update weight (``update.robust``)."""
     if profile.robust == "student_t":
-        return StudentTWeight(profile.robust_dof)
-    if profile.robust == "huber":
-        return HuberWeight(profile.robust_huber_k)
+        return StudentTWeight(STUDENT_T_DOF)
     return NoRobust()
 
 

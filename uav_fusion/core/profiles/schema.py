@@ -228,11 +228,9 @@ _TRACK = _group(
 )
 _UPDATE = _group(
     "update", TRACKER,
-    _k("robust", "robust", CHOICE, DESIGN, "the update uses R / w: none (w = 1), student_t (w = "
-       "(dof + m) / (dof + NIS)) or huber (w = min(1, huber_k / sqrt(NIS)))",
-       choices=("none", "student_t", "huber")),
-    _k("dof", "robust_dof", NUMBER, DESIGN, "student_t: degrees of freedom", bounds="> 0"),
-    _k("huber_k", "robust_huber_k", NUMBER, DESIGN, "huber: threshold", bounds="> 0"),
+    _k("robust", "robust", CHOICE, DESIGN, "the update uses R / w: none (w = 1) or student_t "
+       "(w = (4 + m) / (4 + NIS), at most 1: a Student-t noise of 4 degrees of freedom)",
+       choices=("none", "student_t")),
     _k("hold_after_s", "hold_after_s", NUMBER, FITTED, "without a radar update for this long, "
        "pseudo-measurements hold what the radar no longer measures: each RF fix first applies "
        "climb rate = 0 (2D fixes cannot see it), and, for the single-UAV tracker inside the 3D "
@@ -416,6 +414,8 @@ RETIRED: dict[str, str] = {
     "and a fix that credits no object is kept that long",
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
+    "update.dof": "the Student-t update has 4 degrees of freedom, a constant",
+    "update.huber_k": "gone with the huber update (update.robust is none or student_t)",
     "multi.early_birth_age_s": _EARLY_BIRTH,
     "multi.early_birth_speed_mps": _EARLY_BIRTH,
 }
