@@ -22,6 +22,7 @@ from sensor_msgs.msg import PointCloud2
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.base import feed, make_estimator
+from uav_fusion.core.estimators.consider import consider_for
 from uav_fusion.core.estimators.grid import Outputs, StepGrid
 from uav_fusion.core.estimators.offline import run_tracker, smooth_steps
 from uav_fusion.core.estimators.selection import frames_input
@@ -126,7 +127,10 @@ def test_live_tracker_equals_the_offline_run_and_its_grid(
     profile = load_profile("tracker")
     steps = run_tracker(Tracker(profile, site), stream)
     est = [s for s in steps if s.updated or s.coasted]
-    grid = StepGrid(profile, 10.0)
+    # published covariances carry the radar elevation error's consider term
+    cons = consider_for(profile, site)
+    assert cons is not None
+    grid = StepGrid(profile, 10.0, consider=cons.cov)
     expected_grid = [g for s in steps for g in grid.feed_step(s) if g.published]
     assert len(est) > 300 and len(expected_grid) > 1000
 
@@ -141,6 +145,8 @@ def test_live_tracker_equals_the_offline_run_and_its_grid(
     )
     assert [g.t for g in got] == [s.t for s in est]
     assert np.max(np.abs(np.array([g.x for g in got]) - np.array([s.x for s in est]))) < 1e-9
+    want_p = np.array([cons.cov(s.x, s.P)[:3, :3] for s in est])
+    assert np.max(np.abs(np.array([g.P[:3, :3] for g in got]) - want_p)) < 1e-6
     # the fixed-rate output is the core grid of the same steps, epoch for epoch
     h.spin_until(lambda: len(h.odom) == len(expected_grid))
     odom = [od.odometry_to_state(o) for o in h.odom]

@@ -10,6 +10,7 @@ from rclpy.context import Context
 
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile, run_flight
+from uav_fusion.core.estimators.consider import published_cov
 from uav_fusion.core.scoring.fixed_rate import FlightTruth, grid_from_steps, pool, score_grid
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.graph import Graph
@@ -48,7 +49,8 @@ def test_live_tracker_graph_scores_its_fixed_rate_output_like_the_benchmark(
     assert steps_live == sum(1 for s in run.steps if s.updated or s.coasted)  # nothing lost
     truth = FlightTruth.from_flight(flight, site)
     t0, t1 = truth.span
-    offline = pool([score_grid(grid_from_steps(run.steps, profile, 10.0, t0, t1), truth)])
+    grid = grid_from_steps(run.steps, profile, 10.0, t0, t1, consider=published_cov(profile, site))
+    offline = pool([score_grid(grid, truth)])
     assert live is not None and live.epochs == offline.epochs > 5000
     for key in ("coverage_pct", "err_mean_m", "err_p50_m", "err_p95_m", "err_max_m",
                 "gross_pct", "anees", "nees_in95_pct"):  # fmt: skip

@@ -329,6 +329,7 @@ def write_grid(
     steps: list[Step], flight: Flight, profile: Profile, site: Site, path: str, hz: float
 ) -> None:
     """The run's fixed-rate output over the truth's span (the steps' span without truth)."""
+    from uav_fusion.core.estimators.consider import published_cov
     from uav_fusion.core.scoring.fixed_rate import FlightTruth, grid_from_steps
 
     if not (math.isfinite(hz) and hz > 0):
@@ -339,7 +340,7 @@ def write_grid(
         if not ts:
             raise ConfigError("--grid: the run has no steps and the flight no truth")
         t0, t1 = min(ts), max(ts)
-    grid = grid_from_steps(steps, profile, hz, t0, t1)
+    grid = grid_from_steps(steps, profile, hz, t0, t1, consider=published_cov(profile, site))
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     grid.write_csv(str(out))

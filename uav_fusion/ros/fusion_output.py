@@ -42,6 +42,7 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import NavSatFix
 from visualization_msgs.msg import MarkerArray
 
+from uav_fusion.core.estimators.consider import consider_for
 from uav_fusion.core.estimators.grid import GridEpoch, GridState, Outputs
 from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.live.pipeline import Pipeline
@@ -109,6 +110,9 @@ class FusionOutput:
         self.frame = frame_id
         self.child_frame = child_frame_id
         self.fixed_rate = pipeline.estimator.fixed_rate
+        #: the per-step, smoothed and view covariances get the consider term the fixed-rate
+        #: and track outputs have from the estimator (uav_fusion.core.estimators.consider)
+        self.consider = consider_for(pipeline.estimator.profile, site)
         # publishers need no QoS event handlers (waitables the executor would poll)
         quiet = PublisherEventCallbacks(use_default_callbacks=False)
 
@@ -169,11 +173,13 @@ class FusionOutput:
                 self._grid(gs)
         for ep in out.tracks:
             self._tracks(ep)
+        cons = self.consider
         for t, x, P in out.smoothed:
             self.smoothed_published += 1
             if self.pub_smoothed.get_subscription_count():
+                Pp = cons.cov(x, P) if cons is not None else P
                 self.pub_smoothed.publish(
-                    od.state_to_odometry(t, x, P, self.frame, self.child_frame)
+                    od.state_to_odometry(t, x, Pp, self.frame, self.child_frame)
                 )
 
     def _step(self, step: Step) -> None:
@@ -205,8 +211,10 @@ class FusionOutput:
             return  # e.g. a measurement that only started a track: no estimate to publish
         self.steps_published += 1
         v = step.values
+        if self.consider is not None:
+            v = self.consider.values(v)
         self._path.append((step.t, v[0], v[1], v[2]))
-        self._last = (step.x, step.P)
+        self._last = (step.x, self.consider.cov(step.x, step.P) if self.consider else step.P)
         self._views_dirty = True
         side = self.pub_updated if updated else self.pub_coasted
         odom = self.pub_odom if not self.fixed_rate else None

@@ -78,6 +78,7 @@ from uav_fusion.core.bench.multi import (
     near_labels,
 )
 from uav_fusion.core.data import load_flight
+from uav_fusion.core.estimators.consider import published_cov
 from uav_fusion.core.estimators.offline import run_flight
 from uav_fusion.core.estimators.steps import UPDATED, TrackerStep
 from uav_fusion.core.profiles.model import Profile
@@ -177,7 +178,9 @@ def _track_single(
     """The estimator's part: the single-UAV tracker over the flight, its fixed-rate grid and
     its updates (time order)."""
     result = run_flight(lf.flight, profile, fs.site)
-    grid = grid_from_steps(result.steps, profile, fs.definition.grid_hz, *truth.span)
+    cons = published_cov(profile, fs.site)
+    hz = fs.definition.grid_hz
+    grid = grid_from_steps(result.steps, profile, hz, *truth.span, consider=cons)
     ups = [s for s in result.steps if isinstance(s, TrackerStep) and s.status == UPDATED]
     return grid, ups
 

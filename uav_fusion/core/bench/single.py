@@ -14,6 +14,7 @@ from uav_fusion.core.bench.cache import CachedFlight, generate_flight, read_labe
 from uav_fusion.core.bench.definition import BenchDefinition
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
+from uav_fusion.core.estimators.consider import published_cov
 from uav_fusion.core.estimators.offline import run_flight
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.scoring.fixed_rate import (
@@ -97,7 +98,10 @@ def score_task(task: ScoreTask) -> FlightResult:
     t_start, t_end = truth.span
     if not t_end > t_start:
         raise DataError(cf.folder, None, "the flight has fewer than two truth samples")
-    grid = grid_from_steps(result.steps, task.profile, task.grid_hz, t_start, t_end)
+    cons = published_cov(task.profile, task.site)
+    grid = grid_from_steps(
+        result.steps, task.profile, task.grid_hz, t_start, t_end, consider=cons
+    )
     samples = score_grid(grid, truth, read_labels(cf.folder), task.settings)
     return FlightResult(
         flight_id=cf.flight_id,

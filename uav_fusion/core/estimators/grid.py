@@ -49,6 +49,8 @@ from uav_fusion.core.profiles.model import Profile
 
 FloatArray = npt.NDArray[np.float64]
 Predict = Callable[[FloatArray, FloatArray, float], tuple[FloatArray, FloatArray]]
+#: The covariance a state is published with (``consider(x, P)``).
+Consider = Callable[[FloatArray, FloatArray], FloatArray]
 
 _NAN6 = np.full(6, math.nan)
 _NAN66 = np.full((6, 6), math.nan)
@@ -240,7 +242,8 @@ class GridEmitter(EpochClock):
     ``frequency_hz``: epochs at ``k / frequency_hz`` (unix seconds); ``max_coast_s``: a track
     is published while its last accepted measurement is at most this old (None: always);
     ``predict(x, P, dt)``: the motion model's prediction; ``t0`` / ``t1``: no epoch before
-    ``t0`` (default: the first time fed) or after ``t1``.
+    ``t0`` (default: the first time fed) or after ``t1``; ``consider(x, P)``: the published
+    covariance of a state (:mod:`uav_fusion.core.estimators.consider`; None: ``P``).
     """
 
     def __init__(
@@ -250,12 +253,14 @@ class GridEmitter(EpochClock):
         predict: Predict,
         t0: float | None = None,
         t1: float | None = None,
+        consider: Consider | None = None,
     ) -> None:
         super().__init__(frequency_hz, t0, t1)
         if max_coast_s is not None and not max_coast_s >= 0:
             raise ValueError(f"max_coast_s must be >= 0 or None, got {max_coast_s}")
         self.max_coast_s = math.inf if max_coast_s is None else float(max_coast_s)
         self.predict = predict
+        self.consider = consider
         self._snap: TrackSnapshot | None = None
 
     @property
@@ -295,6 +300,8 @@ class GridEmitter(EpochClock):
             return GridState(k, b, _NAN6, _NAN66, False, False, math.nan, -1, "")
         dt = b - s.t
         x, P = (s.x, s.P) if dt == 0.0 else self.predict(s.x, s.P, dt)
+        if self.consider is not None:
+            P = self.consider(x, P)
         age = b - s.last_accepted_t
         published = age <= self.max_coast_s
         return GridState(k, b, x, P, True, published, age, s.track_id, s.last_source)
@@ -319,6 +326,7 @@ class StepGrid:
         t0: float | None = None,
         t1: float | None = None,
         predict: Predict | None = None,
+        consider: Consider | None = None,
     ) -> None:
         self.emitter = GridEmitter(
             frequency_hz,
@@ -326,6 +334,7 @@ class StepGrid:
             predict if predict is not None else profile_predictor(profile),
             t0,
             t1,
+            consider,
         )
         self.tracks = 0  # tracks started (tentative ones included)
         self.confirmed_tracks = 0  # tracks that became confirmed

@@ -58,6 +58,7 @@ from scipy.optimize import linear_sum_assignment
 
 from uav_fusion.core.estimators.adaptive import rf_status
 from uav_fusion.core.estimators.base import drive
+from uav_fusion.core.estimators.consider import consider_for
 from uav_fusion.core.estimators.emitters import Emitters
 from uav_fusion.core.estimators.grid import GridEpoch, GridState, MultiGrid, Outputs, TrackOutput
 from uav_fusion.core.estimators.kalman import (
@@ -165,6 +166,8 @@ class MultiTracker:
         self.counters: dict[str, int] = {}
         self._args = (settings, grid_hz, t0, t1)
         self.grid = MultiGrid(self, grid_hz, t0, t1, profile.max_coast_s)
+        #: the published covariance (the radar's elevation error as a consider term)
+        self.consider = consider_for(profile, site)
 
     # --- the estimator interface (uav_fusion.core.estimators.base) ----------------------
     def radar_frame(self, frame: RadarFrame) -> Outputs:
@@ -229,7 +232,8 @@ class MultiTracker:
 
     def outputs(self, t: float | None = None) -> list[TrackOutput]:
         """Every confirmed track, predicted to ``t`` (default: its own time) without changing
-        it, highest UAV probability first."""
+        it, highest UAV probability first, with its published covariance (the filter's and
+        the consider term, :mod:`uav_fusion.core.estimators.consider`)."""
         out: list[TrackOutput] = []
         for tr in self.tracks:
             if not tr.confirmed:
@@ -243,10 +247,13 @@ class MultiTracker:
             x, p = f.mean()
             if not self._published(tr, at, x):
                 continue
+            xa, P = np.array(x, dtype=float), expand_upper(p)
+            if self.consider is not None:
+                P = self.consider.cov(xa, P)
             out.append(
                 TrackOutput(
-                    tr.id, at, np.array(x, dtype=float), expand_upper(p), self.uav_prob(tr),
-                    tr.emitter, tr.followed, tr.last_update_t,
+                    tr.id, at, xa, P, self.uav_prob(tr), tr.emitter, tr.followed,
+                    tr.last_update_t,
                 )
             )  # fmt: skip
         out.sort(key=lambda o: (-o.uav_prob, o.track_id))

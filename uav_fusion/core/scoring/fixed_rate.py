@@ -48,7 +48,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.stats import chi2
 
-from uav_fusion.core.estimators.grid import GridEmitter, GridState, Predict, StepGrid
+from uav_fusion.core.estimators.grid import Consider, GridEmitter, GridState, Predict, StepGrid
 from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.profiles.model import Profile
 from uav_fusion.core.records import RF, Flight
@@ -140,12 +140,15 @@ def grid_from_steps(
     t0: float,
     t1: float,
     predict: Predict | None = None,
+    consider: Consider | None = None,
 ) -> Grid:
     """The fixed-rate output of a run (its steps, in processing order) on ``[t0, t1]``.
 
-    Uses ``profile``'s maximum coast and motion model (``predict`` overrides the latter).
+    Uses ``profile``'s maximum coast and motion model (``predict`` overrides the latter);
+    ``consider``: the published covariance of a state (the estimator's
+    :func:`~uav_fusion.core.estimators.consider.consider_for`; None: the filter's).
     """
-    sg = StepGrid(profile, frequency_hz, t0, t1, predict)
+    sg = StepGrid(profile, frequency_hz, t0, t1, predict, consider)
     states = sg.feed_steps(steps)
     states.extend(sg.emitter.finish())
     return stack_states(states, frequency_hz, profile.max_coast_s, sg.confirmed_tracks)
