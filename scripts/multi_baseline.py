@@ -122,9 +122,9 @@ from uav_fusion.core.estimators import Profile, load_profile
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
 from uav_fusion.core.estimators.parts import (
+    RadarFront,
     alignment_from_site,
     packed_to_array,
-    radar_model_from_profile,
     rf_model_from_profile,
 )
 from uav_fusion.core.estimators.selection import frames_input
@@ -231,7 +231,9 @@ class Baseline:
 
     def __post_init__(self) -> None:
         p = self.profile
-        self.radar_r = radar_model_from_profile(p, self.site)
+        # the UAV track's radar R as the trackers start it: with measurement.adaptive, the
+        # allowance for correlated errors at its starting value (the baseline cannot adapt it)
+        self.radar_r = RadarFront(p, self.site, p.score).radar_r
         self.align = alignment_from_site(self.site)
         self.rf_r = rf_model_from_profile(p)
         gate = p.range_gate_m if p.range_gate_m is not None else self.site.radar.range_gate_m

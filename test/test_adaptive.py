@@ -189,6 +189,7 @@ def _tracker_dict(**measurement: object) -> dict[str, object]:
 
 def test_adaptive_with_a_floor_stops_naming_the_key(tmp_path: Path) -> None:
     d = _tracker_dict(measurement__adaptive={"window": 100, "bound": 2.0})
+    d["measurement"]["radar"]["floor_m"] = 40.0  # a fixed allowance as well: refused
     p = tmp_path / "mine.yaml"
     p.write_text(yaml.safe_dump(d))
     with pytest.raises(ConfigError, match=r"mine\.yaml.*measurement\.radar\.floor_m"):

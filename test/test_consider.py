@@ -64,7 +64,8 @@ def test_only_the_trackers_with_the_polar_radar_model_publish_the_term() -> None
     assert (c.east_m, c.north_m) == (site.radar.enu[0], site.radar.enu[1])
     assert c.sigma_el_rad == pytest.approx(math.radians(tracker.radar_sigma_el_deg))
     assert consider_for(load_profile("paper"), site) is None  # the paper's own covariance
-    assert consider_for(tracker.with_changes(radar_sigma_el_deg=0.0), site) is None
+    no_el = tracker.with_changes(adaptive_window=None, radar_sigma_el_deg=0.0)
+    assert consider_for(no_el, site) is None
 
 
 def test_the_fixed_rate_output_keeps_its_states_and_adds_the_term_to_the_filter_cov() -> None:

@@ -20,9 +20,9 @@ from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.kalman import CvKalman
 from uav_fusion.core.estimators.models import cv_process_noise
 from uav_fusion.core.estimators.parts import (
+    RadarFront,
     alignment_from_site,
     packed_to_array,
-    radar_model_from_profile,
     rf_model_from_profile,
 )
 from uav_fusion.core.profiles.model import Profile
@@ -94,7 +94,8 @@ def test_detections_carry_our_r_and_the_same_drops(
     z = np.array([q.e, q.n, q.u])
     assert 1.0 < float(np.linalg.norm(z - p)) < 10.0
     np.testing.assert_array_equal(np.asarray(d.state_vector).ravel(), z)
-    expected = packed_to_array(radar_model_from_profile(profile, site).r_at(*z))
+    # the UAV track's R as the tracker starts it (the online allowance at its start value)
+    expected = packed_to_array(RadarFront(profile, site, profile.score).radar_r.r_at(*z))
     np.testing.assert_allclose(np.asarray(d.measurement_model.covar()), expected, rtol=0, atol=0)
     H = np.asarray(d.measurement_model.matrix())[:, mb.SS_TO_OURS]
     np.testing.assert_array_equal(H, np.hstack([np.eye(3), np.zeros((3, 3))]))

@@ -77,6 +77,8 @@ RETUNED: dict[str, dict[str, Any]] = {
         # the radar's datasheet angle accuracy (+-2 deg) in place of fitted sigmas
         "radar_sigma_az_deg": 2.0,
         "radar_sigma_el_deg": 2.0,
+        # the allowance for correlated radar errors is estimated online (no fitted floor)
+        "radar_floor_m": 0.0,
         "score.rf_tau_s": 20.0,  # its track.max_coast_s
         "max_consecutive_rejections": None,
         # the fitted fallback matrices went: the polar model gives every report its R, and a
@@ -129,8 +131,10 @@ def _fields(p: Profile) -> dict[str, Any]:
     return {f.name: _plain(getattr(p, f.name)) for f in dataclasses.fields(p) if f.name != "source"}
 
 
-# Attributes added since, with the value every shipped profile has (the feature off).
+# Attributes added since, with the value the shipped profiles have (the feature off, except
+# where ADDED_ON turns it on).
 ADDED = {"adaptive_window": None, "adaptive_bound": 2.0}
+ADDED_ON = {"tracker": {"adaptive_window": 200}, "tracker_smoothed": {"adaptive_window": 200}}
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -140,7 +144,7 @@ def test_shipped_profiles_resolve_to_the_values_they_had(name: str) -> None:
     if name == "tracker_smoothed":  # it extends the tracker
         then = _set(then, RETUNED["tracker"])
     now = _fields(load_profile(name))
-    assert {k: now.pop(k) for k in ADDED} == ADDED
+    assert {k: now.pop(k) for k in ADDED} == {**ADDED, **ADDED_ON.get(name, {})}
     assert now == then
 
 
