@@ -1,8 +1,8 @@
 """The published covariance's consider term for the radar's elevation error.
 
-The radar's reports come from its onboard tracker, so their elevation errors are correlated
-over seconds, and the twin and real flights alike show a slowly varying elevation error
-(ground multipath, a tilted mount). The filter treats the reports as independent, and its
+The radar's reports come from its onboard tracking filter (as the paper notes of the R20), so
+their elevation errors are correlated over seconds, and part of them varies slowly or not at
+all (ground multipath, a tilted mount). The filter treats the reports as independent, and its
 stiff vertical averages many of them, so its vertical variance shrinks far below the error
 that averaging cannot remove. The filter does not estimate that error (nothing but the radar
 measures height), so, as in a consider (Schmidt) covariance analysis, the covariance it
