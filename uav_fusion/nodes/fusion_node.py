@@ -274,7 +274,6 @@ class FusionNode(Node):
         )
 
     # --- what tests and tools read --------------------------------------------------------
-
     @property
     def input_topics(self) -> tuple[str, str]:
         """The radar and RF topics the node subscribes to, resolved (``/radar/pose``, ...)."""

@@ -159,7 +159,7 @@ class FusionOutput:
         )
         self._views_dirty = True
         self.last_view = -math.inf
-        self._last: tuple[Any, Any] | None = None  # the latest estimate (x, P) for the views
+        self._last: Step | None = None  # the latest published step, for the views
         self.paths_published = 0
         self.markers_published = 0
 
@@ -214,7 +214,7 @@ class FusionOutput:
         if self.consider is not None:
             v = self.consider.values(v)
         self._path.append((step.t, v[0], v[1], v[2]))
-        self._last = (step.x, self.consider.cov(step.x, step.P) if self.consider else step.P)
+        self._last = step
         self._views_dirty = True
         side = self.pub_updated if updated else self.pub_coasted
         odom = self.pub_odom if not self.fixed_rate else None
@@ -281,9 +281,11 @@ class FusionOutput:
 
     def markers_message(self) -> MarkerArray:
         """fusion/markers: every layer of :mod:`uav_fusion.ros.visualization`."""
-        if self._last is not None:
-            x, P = self._last
-            self.track_layer.update(x[:3], P[:3, :3].tolist())
+        if self._last is not None:  # its arrays are built here, not for every step
+            x, P = self._last.x, self._last.P
+            if self.consider is not None:
+                P = self.consider.cov(x, P)
+            self.track_layer.update(x[:3].tolist(), P[:3, :3].tolist())
         return self.visualization.array(self.node.get_clock().now().to_msg())
 
     def publish_views(self, force: bool = False) -> None:
