@@ -12,6 +12,7 @@ from test_tracker import Scene
 
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.gates import FAR_SIGMAS, PhysicalGates
+from uav_fusion.core.estimators.objects import Drift
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.steps import TrackerStep
 from uav_fusion.core.estimators.tracker import Tracker
@@ -116,6 +117,66 @@ def test_after_a_reset_a_ground_object_far_from_the_last_state_never_starts_the_
     monkeypatch.setattr(PhysicalGates, "grounded", lambda self, obj: False)
     steps = run_tracker(Tracker(_profile(), site), stream)
     assert _started_on(steps, GROUND_ID)
+
+
+def test_a_ground_object_seen_through_its_moving_part_is_still_a_ground_object(
+    site: Site, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a fan or a flag: the radar sees it through its moving part, so its reports carry a
+    # Doppler velocity of 4-8 m/s in changing directions, but their positions stand still;
+    # classed unsure for its first 20 s, then UAV (0.95), 1.5 km from the last state
+    sc = _lost_uav(site)
+    at = _far_point(sc, 1500.0)
+    seen = LOST_AT + 40.0
+    frames = []
+    for f in sc.frames:
+        if f.t >= seen:
+            a = float(sc.rng.uniform(0.0, 2.0 * math.pi))
+            vel = float(sc.rng.uniform(4.0, 8.0)) * np.array([math.cos(a), math.sin(a), 0.0])
+            prob = 0.3 if f.t < seen + 20.0 else 0.95
+            g = sc.report(f.t, GROUND_ID, np.array([at[0], at[1], 1.0]), prob, vel, sd=3.0,
+                          rcs_dbsm=-12.0)  # fmt: skip
+            f = RadarFrame(f.t, (*f.tracks, g))
+        frames.append(f)
+    sc.frames = frames
+    tr = Tracker(_profile(), site)
+    steps = run_tracker(tr, sc.stream())
+    obj = tr.objects.objects[GROUND_ID]
+    assert obj.speed > 2.0 * tr.cfg.stationary_speed_mps  # its Doppler says it moves ...
+    fit = obj.drift.speed()
+    assert fit is not None and fit[0] < 0.2  # ... its positions say it does not
+    assert not _started_on(steps, GROUND_ID) and tr.counters["init_refused_ground"] > 0
+    # the positions decide: judged by its reports' velocity alone, it starts the track
+    monkeypatch.setattr(Drift, "still", lambda self, speed_mps: False)
+    assert _started_on(run_tracker(Tracker(_profile(), site), sc.stream()), GROUND_ID)
+
+
+def test_the_drift_fit_at_its_edges() -> None:
+    def fitted(speed: float, noise: float, n: int, seed: int = 1) -> Drift:
+        rng = np.random.default_rng(seed)
+        d = Drift(100.0)
+        for k in range(n):
+            t = 100.0 + 0.25 * k
+            e, nn = 0.6 * speed * (t - 100.0), 0.8 * speed * (t - 100.0)
+            d.add(t, e + float(rng.normal(0.0, noise)), nn + float(rng.normal(0.0, noise)))
+        return d
+
+    # exact positions: the fitted speed is the speed, known exactly
+    fit = fitted(1.49, 0.0, 40).speed()
+    assert fit is not None and fit[0] == pytest.approx(1.49) and fit[1] == pytest.approx(0.0)
+    assert fitted(1.49, 0.0, 40).still(1.5) and not fitted(1.51, 0.0, 40).still(1.5)
+    # standing still among scattered positions: still once the scatter pins the speed to
+    # better than half the limit, not before
+    few, many = fitted(0.0, 10.0, 12), fitted(0.0, 10.0, 240)
+    fit_few, fit_many = few.speed(), many.speed()
+    assert fit_few is not None and fit_few[1] > 0.75 and not few.still(1.5)
+    assert fit_many is not None and fit_many[1] < 0.75 and many.still(1.5)
+    # two positions, or none apart in time: no fit
+    assert fitted(1.0, 0.0, 2).speed() is None
+    d = Drift(0.0)
+    for _ in range(5):
+        d.add(3.0, 1.0, 1.0)
+    assert d.speed() is None and not d.still(1.5)
 
 
 def test_radar_and_rf_agreeing_corroborate_a_ground_object(site: Site) -> None:

@@ -17,8 +17,10 @@ says so:
   reachable: a parked vehicle, a mast or a reflector sits there for the whole flight. The
   object table's own terms decide: "near the ground" is a mean height below
   ``ground_alt_m`` plus two of its reports' mean vertical sigmas; "stationary" is a mean
-  speed below
-  ``stationary_speed_mps``. The track is airborne once a confirmed state stood more than
+  Doppler speed below ``stationary_speed_mps`` or, once the object is
+  ``stationary_min_age_s`` old, positions that stand still (:class:`~uav_fusion.core.
+  estimators.objects.Drift`: a fan or a flag is seen through its moving part, whose Doppler
+  velocity its reports carry). The track is airborne once a confirmed state stood more than
   ``ground_alt_m`` plus two of its own vertical sigmas up.
 * **RF-only moves.** An RF fix that would move the track further than three of the fix's own
   sigmas is held until a second fix agrees with it (within three sigmas of both fixes plus
@@ -108,8 +110,12 @@ class PhysicalGates:
     def grounded(self, obj: RadarObject) -> bool:
         """Whether ``obj`` is near the ground and stationary (the object table's averages)."""
         cfg = self.cfg
-        low = obj.up < cfg.ground_alt_m + 2.0 * obj.sd_up
-        return low and obj.speed < cfg.stationary_speed_mps
+        if obj.up >= cfg.ground_alt_m + 2.0 * obj.sd_up:
+            return False
+        v = cfg.stationary_speed_mps
+        if obj.speed < v:
+            return True
+        return obj.age_s >= cfg.stationary_min_age_s and obj.drift.still(v)
 
     def refuse_start(self, obj: RadarObject, t: float, e: float, n: float) -> str | None:
         """Why ``obj`` (reported at ``e``, ``n``) may not start the track at ``t``, or None."""

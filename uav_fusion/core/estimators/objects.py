@@ -73,6 +73,60 @@ if TYPE_CHECKING:
 RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
 
 
+class Drift:
+    """A straight line fitted to an object's horizontal positions against time (least
+    squares over all its reports, by running sums): the speed its body moves at, whatever
+    its reports' Doppler velocity says (a fan, a flag or a tree is seen by the radar through
+    its moving part, and its reported velocity is that part's), and how well the positions'
+    own scatter about the line pins that speed down."""
+
+    __slots__ = ("n", "se", "see", "sn", "snn", "st", "ste", "stn", "stt", "t0")
+
+    def __init__(self, t0: float) -> None:
+        self.t0 = t0
+        self.n = 0
+        self.st = self.stt = 0.0
+        self.se = self.ste = self.see = 0.0
+        self.sn = self.stn = self.snn = 0.0
+
+    def add(self, t: float, e: float, n: float) -> None:
+        x = t - self.t0
+        self.n += 1
+        self.st += x
+        self.stt += x * x
+        self.se += e
+        self.ste += x * e
+        self.see += e * e
+        self.sn += n
+        self.stn += x * n
+        self.snn += n * n
+
+    def speed(self) -> tuple[float, float] | None:
+        """The fitted horizontal speed and its standard error (per axis, m/s), or None with
+        fewer than 3 positions or no time between them."""
+        k = self.n
+        if k < 3:
+            return None
+        sxx = self.stt - self.st * self.st / k
+        if not sxx > 1e-9:
+            return None
+        v2 = 0.0
+        var = 0.0
+        for sy, sty, syy in ((self.se, self.ste, self.see), (self.sn, self.stn, self.snn)):
+            sxy = sty - self.st * sy / k
+            b = sxy / sxx
+            ssr = syy - sy * sy / k - b * sxy  # the residuals' sum of squares
+            v2 += b * b
+            var += (ssr if ssr > 0.0 else 0.0) / (k - 2) / sxx
+        return math.sqrt(v2), math.sqrt(0.5 * var)
+
+    def still(self, speed_mps: float) -> bool:
+        """Whether the fit says the object stands still: slower than ``speed_mps``, known to
+        better than half of it."""
+        fit = self.speed()
+        return fit is not None and fit[0] < speed_mps and fit[1] < 0.5 * speed_mps
+
+
 def _ema(old: float, new: float, dt: float, tau: float) -> float:
     if tau <= 0:
         return new
@@ -86,6 +140,7 @@ class RadarObject:
     __slots__ = (
         "class_logit",
         "coasting",
+        "drift",
         "first_t",
         "fused",
         "fused_t",
@@ -113,6 +168,7 @@ class RadarObject:
         self.n_reports = 0
         self.kf: CvKalman | None = None
         self.kf_t = t  # the time of the filter's state (its last non-coasted report)
+        self.drift = Drift(t)  # its non-coasted reports' positions against time
         self.class_logit = 0.0
         self.speed = 0.0
         self.up = 0.0
@@ -239,6 +295,7 @@ class ObjectTable:
                 kf.predict(t - obj.kf_t)
                 nis = kf.update3(e, n, u, r)
                 obj.kf_t = t
+                obj.drift.add(t, e, n)
                 if math.isfinite(nis):
                     # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
                     obj.nis_mean = a * obj.nis_mean + (1.0 - a) * (100.0 if nis > 100.0 else nis)
@@ -286,6 +343,8 @@ class ObjectTable:
             v,
         ]  # fmt: skip
         obj.kf_t = t
+        obj.drift = Drift(t)
+        obj.drift.add(t, e, n)
         obj.up = u
         obj.sd_up = math.sqrt(r[5])
         if rcs is not None and math.isfinite(rcs):
