@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -174,10 +175,10 @@ def test_channel_ignores_non_finite_samples_and_starts_at_its_spec() -> None:
     assert ch.sigma == 5.0 and ch.held
 
 
-def _tracker_dict(**measurement: object) -> dict[str, object]:
+def _tracker_dict(**measurement: object) -> dict[str, Any]:
     src = load_profile("tracker").source
     assert src is not None
-    base = yaml.safe_load(src.read_text())
+    base: dict[str, Any] = yaml.safe_load(src.read_text())
     for path, value in measurement.items():
         node = base
         keys = path.split("__")
@@ -185,6 +186,12 @@ def _tracker_dict(**measurement: object) -> dict[str, object]:
             node = node.setdefault(k, {})
         node[keys[-1]] = value
     return base
+
+
+def _number(value: object) -> float:
+    """A number of an estimator's status (typed ``object``: some statuses hold text)."""
+    assert isinstance(value, int | float)
+    return float(value)
 
 
 def test_adaptive_with_a_floor_stops_naming_the_key(tmp_path: Path) -> None:
@@ -214,13 +221,14 @@ def test_tracker_with_adaptive_noise_runs_a_flight_and_reports_its_sigmas(
     prof = profile_from_dict(d, tmp_path / "adaptive.yaml")
     res = run_flight(load_flight(data_path("default_flight")), prof, load_site())
     status = res.status
-    assert int(status["radar_noise_samples"]) > 100
-    assert int(status["radar_allowance_checks"]) > 5
+    assert _number(status["radar_noise_samples"]) > 100
+    assert _number(status["radar_allowance_checks"]) > 5
+    assert prof.range_gate_m is not None
     f0 = math.radians(prof.radar_sigma_az_deg) * prof.range_gate_m
-    allowance = float(status["radar_allowance_m"])
+    allowance = _number(status["radar_allowance_m"])
     # within its bounds (the status rounds to 0.01 m; on this flight it ends at the lower one)
     assert f0 / 2.0 - 0.01 <= allowance <= 2.0 * f0 + 0.01
     assert allowance != pytest.approx(f0, rel=1e-3)  # the RF fixes moved it
-    sig_az = float(status["radar_sigma_az_deg"])
+    sig_az = _number(status["radar_sigma_az_deg"])
     assert prof.radar_sigma_az_deg <= sig_az <= 2.0 * prof.radar_sigma_az_deg
     assert sum(1 for s in res.steps if s.counted) > 1000

@@ -38,7 +38,9 @@ def test_uncovered_epochs_are_start_up_re_entry_or_other() -> None:
         ((9.5, 9.5, "uav", 60.0, True), "UAV report close"),
     ],
 )
-def test_gross_epoch_causes(args: tuple[object, ...], cause: str) -> None:
+def test_gross_epoch_causes(
+    args: tuple[float | None, float | None, str | None, float, bool], cause: str
+) -> None:
     assert gross_cause(10.0, *args, 5.0, 100.0) == cause
 
 

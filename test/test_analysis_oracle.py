@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 from test_multi_tracker import FREQ_A, Crossing
 
-from uav_fusion.core.analysis.labels import vehicle_links
+from uav_fusion.core.analysis.labels import KindsByTrack, vehicle_links
 from uav_fusion.core.analysis.oracle import (
     SINGLE_RULE,
     LabelOracle,
@@ -21,8 +22,9 @@ from uav_fusion.core.analysis.oracle import (
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.emitters import emitter_key
+from uav_fusion.core.estimators.grid import GridEpoch
 from uav_fusion.core.estimators.multi import run_multi
-from uav_fusion.core.records import RadarFrame, RadarTrack
+from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin import radar_model
 from uav_fusion.core.twin.writers import MANIFEST
@@ -36,7 +38,7 @@ def site() -> Site:
     return load_site()
 
 
-def _kinds(swap_at: float | None, clutter_label: tuple[str, int]) -> dict:  # type: ignore[type-arg]
+def _kinds(swap_at: float | None, clutter_label: tuple[str, int]) -> KindsByTrack:
     """Labels of the Crossing scene's radar tracks 10 (on A), 20 (on B) and 99 (clutter);
     from ``swap_at`` track 10 follows B and 20 follows A."""
     ts = np.array([1000.0] if swap_at is None else [1000.0, swap_at])
@@ -46,7 +48,9 @@ def _kinds(swap_at: float | None, clutter_label: tuple[str, int]) -> dict:  # ty
     return {10: (ts, lab10), 20: (ts, lab20), 99: (np.array([1000.0]), [clutter_label])}
 
 
-def _ids_at(epochs: list, truth, within: float = 40.0) -> list[int | None]:  # type: ignore[no-untyped-def]
+def _ids_at(
+    epochs: list[GridEpoch], truth: Callable[[float], np.ndarray], within: float = 40.0
+) -> list[int | None]:
     out: list[int | None] = []
     for ep in epochs:
         p = truth(ep.t - 1000.0)
@@ -122,7 +126,7 @@ def test_with_the_single_uav_output_rule_an_rf_only_track_is_published(site: Sit
     """The single-UAV oracle is scored as the single-UAV grid is: a track is published until
     the deleter drops it, also inside the radar's cover without radar."""
     sc = Crossing(site, seed=4)
-    fixes = [x for x in sc.stream() if not isinstance(x, RadarFrame)]
+    fixes: list[RadarFrame | RfAttempt] = [x for x in sc.stream() if not isinstance(x, RadarFrame)]
     published = {}
     for settings in (None, SINGLE_RULE):
         oracle = LabelOracle(

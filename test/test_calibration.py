@@ -16,6 +16,7 @@ from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
 from uav_fusion.core.scoring.calibration import (
+    CalibrationResult,
     angle_residuals,
     calibrate,
     format_alignment,
@@ -27,13 +28,13 @@ from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
 
 @pytest.fixture(scope="module")
-def default_result():  # type: ignore[no-untyped-def]
+def default_result() -> CalibrationResult:
     site = load_site()
     flight = load_flight(data_path(DEFAULT_FLIGHT), site, strict=True)
     return calibrate(flight, site.radar.enu, site.radar.range_gate_m)
 
 
-def test_default_flight_meets_the_calibration_targets(default_result) -> None:  # type: ignore[no-untyped-def]
+def test_default_flight_meets_the_calibration_targets(default_result: CalibrationResult) -> None:
     r = default_result
     # radar: UAV reports at ~0.25 s, raw 3D error like the paper's, worse beyond the gate
     assert 2900 <= r.radar_uav_reports <= 3300
@@ -60,7 +61,7 @@ def test_default_flight_meets_the_calibration_targets(default_result) -> None:  
     assert r.rf_north.count + r.rf_south.count == r.rf.count
 
 
-def test_error_grows_with_distance_from_the_radar(default_result) -> None:  # type: ignore[no-untyped-def]
+def test_error_grows_with_distance_from_the_radar(default_result: CalibrationResult) -> None:
     means = [b.stats.mean for b in default_result.radar_bins if b.stats.count > 50]
     assert means[0] < means[-1]
     assert means[-1] > 2 * means[0]
@@ -213,7 +214,9 @@ def test_calibrate_command_writes_the_site_file_the_trackers_read(
     assert Tracker(load_profile("tracker"), site).front.align is not None
 
 
-def test_calibrate_command_rejects_a_missing_folder(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+def test_calibrate_command_rejects_a_missing_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert cli_main(["calibrate", str(tmp_path / "nowhere")]) == 2
     assert "nowhere" in capsys.readouterr().err
 

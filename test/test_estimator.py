@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -30,8 +32,12 @@ from uav_fusion.core.estimators import (
     run_flight,
     run_stream,
 )
-from uav_fusion.core.estimators.synthetic import simulate_stream, stream_to_flight
-from uav_fusion.core.records import RADAR, RF, Measurement, RadarFrame, RadarTrack
+from uav_fusion.core.estimators.synthetic import (
+    SyntheticStream,
+    simulate_stream,
+    stream_to_flight,
+)
+from uav_fusion.core.records import RADAR, RF, Flight, Measurement, RadarFrame, RadarTrack
 from uav_fusion.core.scoring.noise import estimate_r, sample_cov, trimmed_cov
 from uav_fusion.core.site import Site, load_site
 
@@ -50,8 +56,14 @@ def _profile(**kw: object) -> Profile:
     return load_profile("paper").with_changes(**base)
 
 
-def radar(t: float, z: tuple[float, float, float], seq: int, **kw: object) -> Measurement:
-    return Measurement(t, RADAR, np.array(z, float), seq=seq, **kw)  # type: ignore[arg-type]
+def radar(
+    t: float,
+    z: tuple[float, float, float],
+    seq: int,
+    track_id: int | None = None,
+    uav_prob: float | None = None,
+) -> Measurement:
+    return Measurement(t, RADAR, np.array(z, float), seq=seq, track_id=track_id, uav_prob=uav_prob)
 
 
 def rf(t: float, z: tuple[float, float], seq: int) -> Measurement:
@@ -98,11 +110,13 @@ def test_kernel_matches_matrix_reference() -> None:
         if i % 3:
             z = x[:3] + rng.normal(size=3) * 5
             x, P, nis = kf_update_joseph(x, P, z, R3f)
-            assert k.update3(*map(float, z), pack_r(R3f)) == pytest.approx(nis, rel=1e-10)
+            z0, z1, z2 = map(float, z)
+            assert k.update3(z0, z1, z2, pack_r(R3f)) == pytest.approx(nis, rel=1e-10)
         else:
             z = x[:2] + rng.normal(size=2) * 20
             x, P, nis = kf_update_joseph(x, P, z, R2)
-            assert k.update2(*map(float, z), pack_r(R2)) == pytest.approx(nis, rel=1e-10)
+            z0, z1 = map(float, z)
+            assert k.update2(z0, z1, pack_r(R2)) == pytest.approx(nis, rel=1e-10)
     np.testing.assert_allclose(k.x_array(), x, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(k.P_array(), P, rtol=1e-9, atol=1e-9 * np.abs(P).max())
     Pk = k.P_array()
@@ -182,7 +196,9 @@ def test_nis_rejection_coasts_on_the_prediction(site: Site) -> None:
     est = FusionEstimator(_profile(), site)
     est.process(radar(0.0, (300.0, -200.0, 50.0), 0))
     est.process(radar(1.0, (310.0, -200.0, 50.0), 1))
-    x1, P1 = est.state()  # type: ignore[misc]
+    state = est.state()
+    assert state is not None
+    x1, P1 = state
     s = est.process(rf(3.0, (2300.0, -200.0), 2))[0]
     assert s.status == "coasted" and s.reason == "nis" and s.coasted and not s.updated
     assert s.nis is not None and s.nis > 5.991
@@ -227,7 +243,8 @@ def test_frame_picks_smallest_acceptable_nis(site: Site) -> None:
     assert [s.seq for s in steps] == [1, 2, 3]
     assert [s.status for s in steps] == ["discarded", "updated", "discarded"]
     assert steps[1].track_id == 1 and steps[0].reason == "not_selected"
-    assert steps[0].nis is not None and steps[0].nis > steps[2].nis  # type: ignore[operator]
+    nis0, nis2 = steps[0].nis, steps[2].nis
+    assert nis0 is not None and nis2 is not None and nis0 > nis2
     assert sum(s.counted for s in steps) == 1
 
 
@@ -402,7 +419,8 @@ def test_m_of_n_start_keeps_outlier_starts_out_of_the_estimates(site: Site) -> N
         if m.source == RADAR and m.t - t0 < 60.0:
             continue  # radar only from 60 s
         if m.source == RF and m.t - t0 < 40.0 and (len(ms) < 2 or rng.random() < 0.6):
-            m = rf(m.t, tuple(m.z + rng.uniform(-3000, 3000, 2)), m.seq)  # type: ignore[arg-type]
+            e, n = map(float, m.z + rng.uniform(-3000, 3000, 2))
+            m = rf(m.t, (e, n), m.seq)
         ms.append(m)
     t_truth = {m.seq: i for i, m in enumerate(s.measurements)}
     truth = {m.seq: s.truth[t_truth[m.seq]] for m in ms}
@@ -439,9 +457,9 @@ def test_external_reset(site: Site) -> None:
 
 
 # --- flights: selection, stream, runner ----------------------------------------------------
-def _flight(site: Site, seed: int = 3, **kw: object):  # type: ignore[no-untyped-def]
+def _flight(site: Site, seed: int = 3) -> tuple[SyntheticStream, Flight]:
     s = simulate_stream(seed, 120.0, (2.0, 2.0, 2.0), R3, R2, velocity_std=5.0)
-    return s, stream_to_flight(s, site, **kw)  # type: ignore[arg-type]
+    return s, stream_to_flight(s, site)
 
 
 def test_largest_track_selection(site: Site) -> None:
@@ -474,7 +492,8 @@ def test_stream_order_seq_and_selection(site: Site) -> None:
     online = flight_measurements(fl, prof.with_changes(radar_selection="online"), site)
     frames = [i for i in online if isinstance(i, list)]
     assert sum(len(f) == 2 for f in frames) == len(extra)
-    assert flight_measurements(fl, prof, site)[5].seq == flat[5].seq  # deterministic
+    again = flight_measurements(fl, prof, site)[5]
+    assert isinstance(again, Measurement) and again.seq == flat[5].seq  # deterministic
 
 
 def test_run_flight_counts_and_streaming_equivalence(site: Site, tmp_path: Path) -> None:
@@ -518,7 +537,8 @@ def test_paper_profile() -> None:
     p = load_profile("paper")
     assert p.name == "paper" and p.range_gate_m == 800.0 and p.nis_probability == 0.95
     assert p.radar_selection == "largest_track" and p.min_uav_prob is None
-    assert p.r_radar.shape == (3, 3) and p.r_rf.shape == (2, 2)
+    assert p.r_radar is not None and p.r_radar.shape == (3, 3)
+    assert p.r_rf is not None and p.r_rf.shape == (2, 2)
     assert profile_from_dict(p.as_dict()).q == p.q
 
 
@@ -540,7 +560,9 @@ def test_paper_profile() -> None:
         (lambda d: d.update(gate=0.9), "unknown key 'gate'"),
     ],
 )
-def test_profile_errors_name_file_and_key(tmp_path: Path, edit, message: str) -> None:  # type: ignore[no-untyped-def]
+def test_profile_errors_name_file_and_key(
+    tmp_path: Path, edit: Callable[[dict[str, Any]], object], message: str
+) -> None:
     doc = load_profile("paper").as_dict()
     edit(doc)
     f = tmp_path / "bad.yaml"
@@ -654,5 +676,7 @@ def test_estimate_r_command_writes_a_loadable_profile(
     text = capsys.readouterr().out
     assert "R_radar (m^2)" in text and "R_rf (m^2)" in text and "suggest q" in text
     p = load_profile(f)
-    assert p.r_rf[0, 0] > 100 * load_profile("paper").r_rf[0, 0]  # the literal, heavy-tailed R
+    paper_r_rf = load_profile("paper").r_rf
+    assert p.r_rf is not None and paper_r_rf is not None
+    assert p.r_rf[0, 0] > 100 * paper_r_rf[0, 0]  # the literal, heavy-tailed R
     assert "--rf-method all" in p.r_note

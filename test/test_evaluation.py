@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import random
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -248,7 +249,7 @@ def test_arrival_order_does_not_change_any_number() -> None:
 
     def run(order: list[tuple[str, tuple[object, ...]]]) -> Evaluation:
         ev = Evaluator(radar_enu=(300.0, -200.0, 10.0))
-        feed = {
+        feed: dict[str, Callable[..., bool]] = {
             "truth": ev.add_truth,
             "radar": ev.add_radar_report,
             "rf": ev.add_rf_attempt,
@@ -256,7 +257,7 @@ def test_arrival_order_does_not_change_any_number() -> None:
             "valid": ev.add_validated,
         }
         for kind, args in order:
-            feed[kind](*args)  # type: ignore[operator]
+            feed[kind](*args)
         return ev.evaluate()
 
     ref = run(items)

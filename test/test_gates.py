@@ -37,7 +37,9 @@ class Loop(Scene):
 
     def uav(self, t: float) -> np.ndarray:
         a = 0.02 * t * 400.0 / self.radius  # 8 m/s
-        return self.r0 + np.array([self.radius * math.cos(a), self.radius * math.sin(a), 50.0])
+        return self.r0 + np.array(
+            [self.radius * math.cos(a), self.radius * math.sin(a), 50.0], dtype=np.float64
+        )
 
 
 class FarLoop(Loop):
@@ -254,10 +256,11 @@ def _coast_then_fix(
     p = sc.uav(t1)
     out = (p[:2] - sc.r0[:2]) / np.linalg.norm(p[:2] - sc.r0[:2])
     at = p[:2] + off_m * out
-    sc.fixes.append(RfAttempt(t1, 90_000, True, 0.0, 0.0, *map(float, at), 5.0, 4, 4))
+    e, n = map(float, at)
+    sc.fixes.append(RfAttempt(t1, 90_000, True, 0.0, 0.0, e, n, 5.0, 4, 4))
     if second:
-        at2 = at + 3.0
-        sc.fixes.append(RfAttempt(t1 + 4.0, 90_001, True, 0.0, 0.0, *map(float, at2), 5.0, 4, 4))
+        e2, n2 = map(float, at + 3.0)
+        sc.fixes.append(RfAttempt(t1 + 4.0, 90_001, True, 0.0, 0.0, e2, n2, 5.0, 4, 4))
     tr = Tracker(_profile(), site)
     return tr, run_tracker(tr, sc.stream())
 

@@ -172,6 +172,7 @@ def test_epoch_equal_to_a_step_time_is_that_steps_state_and_error() -> None:
     """A real estimator run whose radar reports fall on the 10 Hz grid (every 0.5 s)."""
     site = load_site()
     prof = load_profile("paper")
+    assert prof.r_radar is not None and prof.r_rf is not None
     stream = simulate_stream(
         5, 120.0, prof.q, prof.r_radar, prof.r_rf, radar_period_s=0.5, jitter=0.0,
         x0=np.array([300.0, -200.0, 60.0, 6.0, -3.0, 0.0]), t0=T0,
@@ -305,6 +306,7 @@ def test_live_feeding_with_advance_equals_the_offline_grid() -> None:
     epochs and states as ``grid_from_steps`` over the finished run."""
     site = load_site()
     prof = load_profile("paper")
+    assert prof.r_radar is not None and prof.r_rf is not None
     stream = simulate_stream(9, 60.0, prof.q, prof.r_radar, prof.r_rf, t0=T0)
     est = FusionEstimator(prof, site)
     steps = [s for m in stream.measurements for s in est.process(m)]

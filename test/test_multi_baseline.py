@@ -82,9 +82,11 @@ def test_detections_carry_our_r_and_the_same_drops(
     r0 = np.array(site.radar.enu, dtype=float)
     p = r0 + np.array([300.0, 400.0, 80.0])
     far = r0 + np.array([3000.0, 0.0, 50.0])  # beyond the profile's far gate (2500 m)
-    mk = lambda tid, q, v: RadarTrack(  # noqa: E731
-        10.0, tid, 0.0, 0.0, 0.0, *map(float, q), v, 0.8, None, -10.0
-    )
+
+    def mk(tid: int, q: np.ndarray, v: tuple[float, float, float] | None) -> RadarTrack:
+        e, n, u = map(float, q)
+        return RadarTrack(10.0, tid, 0.0, 0.0, 0.0, e, n, u, v, 0.8, None, -10.0)
+
     dets = b.radar_detections(RadarFrame(10.0, (mk(1, p, (1.0, 2.0, 0.0)), mk(2, far, None))))
     (d,) = dets  # beyond the gate: dropped
     # the report as ours takes it: corrected for the radar's misalignment
@@ -119,9 +121,10 @@ def test_detections_carry_our_r_and_the_same_drops(
     assert b.rf_detection(bad) is None
     # the variant that also drops reports the radar itself classes below a probability
     bc = mb.build_baseline(profile, site, 0.5)
-    low = RadarTrack(10.0, 3, 0.0, 0.0, 0.0, *map(float, p), None, 0.3, None, -10.0)
-    unknown = RadarTrack(10.0, 4, 0.0, 0.0, 0.0, *map(float, p), None, None, None, -10.0)
-    high = RadarTrack(10.0, 5, 0.0, 0.0, 0.0, *map(float, p), None, 0.5, None, -10.0)
+    pe, pn, pu = map(float, p)
+    low = RadarTrack(10.0, 3, 0.0, 0.0, 0.0, pe, pn, pu, None, 0.3, None, -10.0)
+    unknown = RadarTrack(10.0, 4, 0.0, 0.0, 0.0, pe, pn, pu, None, None, None, -10.0)
+    high = RadarTrack(10.0, 5, 0.0, 0.0, 0.0, pe, pn, pu, None, 0.5, None, -10.0)
     kept = bc.radar_detections(RadarFrame(10.0, (low, unknown, high)))
     assert [d.metadata["radar_track"] for d in kept] == [5] and bc.dropped == {"class": 2}
 

@@ -9,7 +9,8 @@ import pytest
 
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.kalman import CvFilter
-from uav_fusion.core.estimators.multi import MultiSettings, MultiTracker, UavTrack
+from uav_fusion.core.estimators.multi import MultiTracker, UavTrack
+from uav_fusion.core.profiles.settings import MultiSettings
 from uav_fusion.core.site import load_site
 
 T0 = 100.0

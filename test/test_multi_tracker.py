@@ -20,7 +20,8 @@ from uav_fusion.core.estimators import Profile, load_profile, profile_from_dict
 from uav_fusion.core.estimators.emitters import UNKNOWN_EMITTER, emitter_key
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.kalman import merge_nis, velocity_nis
-from uav_fusion.core.estimators.multi import MultiSettings, MultiTracker, run_multi
+from uav_fusion.core.estimators.multi import MultiTracker, run_multi
+from uav_fusion.core.profiles.settings import MultiSettings
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import RadarCalibration, Site, load_site
 
@@ -42,16 +43,17 @@ class Crossing:
         self.swap_ids = swap_ids
 
     def a(self, t: float) -> np.ndarray:
-        return self.r0 + np.array([400.0 - 8.0 * t, 300.0, 50.0])
+        return self.r0 + np.array([400.0 - 8.0 * t, 300.0, 50.0], dtype=np.float64)
 
     def b(self, t: float) -> np.ndarray:
-        return self.r0 + np.array([-400.0 + 8.0 * t, 320.0, 60.0])
+        return self.r0 + np.array([-400.0 + 8.0 * t, 320.0, 60.0], dtype=np.float64)
 
     def report(self, t: float, tid: int, p: np.ndarray, v: np.ndarray, prob: float) -> RadarTrack:
         z = p + self.rng.normal(0.0, 4.0, 3)
         rcs = round(-10.0 + float(self.rng.normal(0.0, 2.0)), 3)
         ned = (float(v[1]), float(v[0]), float(-v[2]))
-        return RadarTrack(t, tid, 0.0, 0.0, 0.0, *map(float, z), ned, prob, None, rcs)
+        e, n, u = map(float, z)
+        return RadarTrack(t, tid, 0.0, 0.0, 0.0, e, n, u, ned, prob, None, rcs)
 
     def stream(self, duration_s: float = 100.0) -> list[RadarFrame | RfAttempt]:
         items: list[tuple[float, int, RadarFrame | RfAttempt]] = []
@@ -79,7 +81,9 @@ class Crossing:
         return [x[2] for x in items]
 
 
-def _ids_near(epochs: list, truth, within: float = 60.0) -> list[int | None]:  # type: ignore[no-untyped-def]
+def _ids_near(
+    epochs: list[GridEpoch], truth: Callable[[float], np.ndarray], within: float = 60.0
+) -> list[int | None]:
     out: list[int | None] = []
     for ep in epochs:
         p = truth(ep.t - 1000.0)
@@ -116,14 +120,14 @@ def test_two_uavs_crossing_keep_their_ids_and_no_clutter_track(site: Site) -> No
 def test_the_radar_misalignment_is_corrected_before_any_report_is_used(site: Site) -> None:
     from uav_fusion.core.estimators.parts import RadarAlignment
 
-    r0 = tuple(float(v) for v in site.radar.enu)
-    skew = RadarAlignment(r0, -1.5, -0.5)  # type: ignore[arg-type]
+    r0 = site.radar.enu
+    skew = RadarAlignment(r0, -1.5, -0.5)
     stream = [skew.frame(x) if isinstance(x, RadarFrame) else x for x in Crossing(site, 3).stream()]
     profile = load_profile("tracker")
     exact = RadarCalibration(az_sigma_deg=0.0, el_sigma_deg=0.0)  # surveyed: not refined
     plain = site.calibrated(exact)
     aligned = site.calibrated(dataclasses.replace(exact, az_bias_deg=1.5, el_bias_deg=0.5))
-    fixed = RadarAlignment(r0, 1.5, 0.5)  # type: ignore[arg-type]
+    fixed = RadarAlignment(r0, 1.5, 0.5)
     a = run_multi(MultiTracker(profile, aligned), stream, 1.0, 1000.0, 1099.0)
     b = run_multi(
         MultiTracker(profile, plain),
@@ -247,12 +251,14 @@ def test_a_wrong_emitter_link_is_undone_without_losing_the_track(site: Site) -> 
         stream.append(item)
         tau = item.t - 1000.0
         if isinstance(item, RadarFrame) and abs(tau - 20.0) < 1e-9:
-            stream.append(RfAttempt(item.t + 0.01, k, True, 0.0, 0.0, *map(float, pad), 8.0, 4, 4,
+            e, n = map(float, pad)
+            stream.append(RfAttempt(item.t + 0.01, k, True, 0.0, 0.0, e, n, 8.0, 4, 4,
                                     center_freq_hz=5745e6))  # fmt: skip
             k += 1
         elif isinstance(item, RadarFrame) and tau > 24.0 and int(tau * 4) % 16 == 0:
-            stream.append(RfAttempt(item.t + 0.01, k, True, 0.0, 0.0, *map(float, far), 8.0,
-                                    4, 4, center_freq_hz=5745e6))  # fmt: skip
+            e, n = map(float, far)
+            stream.append(RfAttempt(item.t + 0.01, k, True, 0.0, 0.0, e, n, 8.0, 4, 4,
+                                    center_freq_hz=5745e6))  # fmt: skip
             k += 1
     mt = MultiTracker(load_profile("tracker"), site)
     epochs = run_multi(mt, stream, 1.0, 1000.0, 1099.0)
@@ -346,6 +352,7 @@ def scene_stream(
             v = (u.path(tau + 0.5) - u.path(tau - 0.5)).astype(float)
             ned = (float(v[1]), float(v[0]), float(-v[2]))
             rcs = round(-10.0 + float(rng.normal(0.0, 2.0)), 3)
+            e, n, up = map(float, p)
             reps.append(
                 RadarTrack(
                     t,
@@ -353,7 +360,9 @@ def scene_stream(
                     0.0,
                     0.0,
                     0.0,
-                    *map(float, p),
+                    e,
+                    n,
+                    up,
                     ned,
                     u.uav_prob,
                     float(np.linalg.norm(p - r0)),
@@ -387,8 +396,8 @@ def _flight(start: np.ndarray, takeoff_s: float, v: np.ndarray, climb_mps: float
             return start.copy()
         dt = tau - takeoff_s
         if dt <= t_climb:
-            return start + np.array([0.0, 0.0, climb_mps * dt])
-        return start + np.array([0.0, 0.0, 40.0]) + v * (dt - t_climb)
+            return start + np.array([0.0, 0.0, climb_mps * dt], dtype=np.float64)
+        return start + np.array([0.0, 0.0, 40.0], dtype=np.float64) + v * (dt - t_climb)
 
     return path
 
@@ -552,8 +561,8 @@ def test_an_emitter_whose_fixes_keep_missing_its_track_moves_to_the_right_one(
     b_path = _flight(np.array([-100.0, 200.0, 0.0]), 0.0, np.array([0.0, 8.0, 0.0]))
 
     def a_path(tau: float) -> np.ndarray:
-        p = b_path(min(tau, 22.0)) + np.array([40.0, 0.0, 0.0])
-        return p + np.array([8.0, 0.0, 0.0]) * max(0.0, tau - 22.0)
+        p = b_path(min(tau, 22.0)) + np.array([40.0, 0.0, 0.0], dtype=np.float64)
+        return p + np.array([8.0, 0.0, 0.0], dtype=np.float64) * max(0.0, tau - 22.0)
 
     a = Uav(a_path, 51, seen=lambda tau: tau >= 40.0, freq_hz=FREQ_A)
     stream = [

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from uav_fusion.core.estimators import FusionEstimator, Step, load_profile
+from uav_fusion.core.estimators import FusionEstimator, Profile, Step, load_profile
 from uav_fusion.core.estimators.models import cv_process_noise, cv_transition, position_h
 from uav_fusion.core.estimators.synthetic import simulate_stream
 from uav_fusion.core.records import RADAR, Measurement
@@ -35,7 +35,7 @@ class Ref:
     nis: float | None
 
 
-def _profile(q: tuple[float, float, float]):  # type: ignore[no-untyped-def]
+def _profile(q: tuple[float, float, float]) -> Profile:
     # radar range gate out of the way: the oracles know nothing of it
     return load_profile("paper").with_changes(
         q=q, r_radar=R_RADAR, r_rf=R_RF, range_gate_m=1e7, init_sources=(RADAR,)
@@ -69,7 +69,7 @@ def _ours(ms: list[Measurement], q: tuple[float, float, float]) -> list[Step]:
     return out
 
 
-def _initial(m: Measurement, profile) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+def _initial(m: Measurement, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
     x = np.zeros(6)
     x[:3] = m.z
     P = np.zeros((6, 6))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -92,9 +93,9 @@ RETUNED: dict[str, dict[str, Any]] = {
 DEFAULTS = {"paper": {"score.large_rcs_dbsm": 0.0, "score.rf_tau_s": 15.0}}
 
 
-def _without(fields: dict[str, Any], paths: Any) -> dict[str, Any]:
+def _without(fields: dict[str, Any], paths: Iterable[str]) -> dict[str, Any]:
     """``fields`` without the (possibly dotted: ``score.x``) attributes ``paths``."""
-    out = json.loads(json.dumps(fields))
+    out: dict[str, Any] = json.loads(json.dumps(fields))
     for path in paths:
         *head, last = path.split(".")
         d = out
@@ -109,7 +110,7 @@ def _renamed(fields: dict[str, Any]) -> dict[str, Any]:
 
 
 def _set(fields: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
-    out = json.loads(json.dumps(fields))
+    out: dict[str, Any] = json.loads(json.dumps(fields))
     for path, v in values.items():
         *head, last = path.split(".")
         d = out

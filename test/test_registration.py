@@ -28,7 +28,9 @@ class WideLoop(Scene):
 
     def uav(self, t: float) -> np.ndarray:
         a = 0.008 * t
-        return self.r0 + np.array([1000.0 * math.cos(a), 1000.0 * math.sin(a), 60.0])
+        return self.r0 + np.array(
+            [1000.0 * math.cos(a), 1000.0 * math.sin(a), 60.0], dtype=np.float64
+        )
 
 
 def _skewed(site: Site, seed: int, az_deg: float) -> list[RadarFrame | RfAttempt]:

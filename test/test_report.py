@@ -36,7 +36,8 @@ def synthetic(site: Site, with_rcs: bool = True) -> Evaluation:
         p = truth(t)
         rng_m = float(np.linalg.norm(p - radar))
         z = p + rng.normal(0.0, 3.0 + rng_m / 50.0, 3)
-        ev.add_radar_report(t, *z, rcs_dbsm=float(rng.normal(-10, 3)) if with_rcs else None)
+        rcs = float(rng.normal(-10, 3)) if with_rcs else None
+        ev.add_radar_report(t, float(z[0]), float(z[1]), float(z[2]), rcs_dbsm=rcs)
         if rng_m < site.radar.range_gate_m:
             ev.add_validated(t, "radar", z)
             ev.add_step(t, "updated", np.r_[0.5 * (z + p), 0.0, 0.0, 0.0])

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -50,8 +52,9 @@ def test_enu_round_trip() -> None:
     assert u.tolist() == pytest.approx([30.0, 120.0], abs=1e-6)
 
 
-def _doc() -> dict:
-    return yaml.safe_load(Path(load_site().source or "").read_text())
+def _doc() -> dict[str, Any]:
+    doc: dict[str, Any] = yaml.safe_load(Path(load_site().source or "").read_text())
+    return doc
 
 
 @pytest.mark.parametrize(
@@ -83,7 +86,9 @@ def _doc() -> dict:
         (lambda d: d["radar"].update(calibration=[0.5]), r"radar\.calibration: must be a mapping"),
     ],
 )
-def test_bad_site_is_rejected_with_a_clear_message(mutate, message: str) -> None:  # type: ignore[no-untyped-def]
+def test_bad_site_is_rejected_with_a_clear_message(
+    mutate: Callable[[dict[str, Any]], object], message: str
+) -> None:
     doc = _doc()
     mutate(doc)
     with pytest.raises(ConfigError, match=message):

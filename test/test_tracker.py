@@ -20,7 +20,7 @@ from uav_fusion.core.estimators.gates import PhysicalGates
 from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
-from uav_fusion.core.estimators.steps import TrackerStep
+from uav_fusion.core.estimators.steps import Step, TrackerStep
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack, RfAttempt, TruthFix
@@ -176,7 +176,9 @@ class Scene:
     def uav(self, t: float) -> np.ndarray:
         """A slow loop 300-500 m from the radar at 50 m height."""
         a = 0.02 * t
-        return self.r0 + np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 50.0])
+        return self.r0 + np.array(
+            [400.0 * math.cos(a), 400.0 * math.sin(a), 50.0], dtype=np.float64
+        )
 
     def report(
         self,
@@ -191,7 +193,8 @@ class Scene:
         z = p + self.rng.normal(0.0, sd, 3)
         v = (float(vel[1]), float(vel[0]), float(-vel[2]))  # NED
         rcs = round(rcs_dbsm + float(self.rng.normal(0.0, 2.0)), 3)  # fluctuates look to look
-        return RadarTrack(t, tid, 0.0, 0.0, 0.0, *map(float, z), v, prob, None, rcs)
+        e, n, u = map(float, z)
+        return RadarTrack(t, tid, 0.0, 0.0, 0.0, e, n, u, v, prob, None, rcs)
 
     def build(
         self,
@@ -234,7 +237,7 @@ class Scene:
         items.sort(key=lambda x: (x[0], x[1]))
         return [x[2] for x in items]
 
-    def error(self, s: TrackerStep) -> float:
+    def error(self, s: Step) -> float:
         t = round(s.t * 4) / 4
         return float(np.linalg.norm(s.x[:3] - self.truth[t]))
 
@@ -296,7 +299,7 @@ def _birds(sc: Scene, t: float, k: int) -> RadarTrack:
     c = sc.r0 + np.array([250.0 * math.cos(0.01 * t), -300.0, 30.0])
     p = c + rng.normal(0.0, 25.0, 3)
     trk = sc.report(t, DECOY_ID, p, 0.6 if (k // 30) % 2 else 0.3, rng.normal(0, 8.0, 3))
-    return RadarTrack(*[getattr(trk, f) for f in RadarTrack.__slots__[:11]], -25.0)
+    return dataclasses.replace(trk, rcs_dbsm=-25.0)
 
 
 @pytest.mark.parametrize("decoy", [_ghost, _vehicle, _birds], ids=["ghost", "vehicle", "birds"])
@@ -384,11 +387,12 @@ def test_a_coasted_report_leaves_the_objects_filter_where_it_was(site: Site) -> 
     for k in range(40):  # 10 s of real reports along the track
         table.update(report(0.25 * k, 200.0 + 1.5 * k, -10.0 - 0.01 * k))
     obj = table.objects[5]
+    assert obj.kf is not None
     x_before = list(obj.kf.x)
     for k in range(40, 56):  # 4 s of coasts: a report 40 m off, velocity and RCS repeated
         table.update(report(0.25 * k, 260.0 + 40.0, -10.39))
     assert obj.coasting and obj.last_t == pytest.approx(13.75)
-    assert obj.kf.x == x_before and obj.kf_t == pytest.approx(9.75)
+    assert obj.kf is not None and obj.kf.x == x_before and obj.kf_t == pytest.approx(9.75)
     # a fine RF fix where the object's own motion puts it at 14 s is credited (had the
     # coasts updated the filter, it would sit 40 m east of there)
     e14, n14 = map(float, r0[:2] + np.array([200.0 + 6.0 * 14.0, 300.0]))
@@ -441,7 +445,7 @@ class HoverScene(Scene):
     def uav(self, t: float) -> np.ndarray:
         a, b = self.HOVER
         s = 200.0 + 6.0 * (min(t, a) + max(0.0, t - b))
-        return self.r0 + np.array([0.8 * s, 0.6 * s, 50.0])
+        return self.r0 + np.array([0.8 * s, 0.6 * s, 50.0], dtype=np.float64)
 
 
 def test_a_hover_the_radar_cannot_see_stops_the_coast_drifting(site: Site) -> None:
@@ -735,7 +739,8 @@ def test_a_challenger_must_outscore_the_followed_object_by_the_margin_for_the_ti
     monkeypatch.setattr(PhysicalGates, "rf_outside", lambda self, *a: False)
     sc = _swap_scene(site)
     prof = load_profile("tracker")
-    strict = dataclasses.replace(prof, score=dataclasses.replace(prof.score, **{key: value}))
+    change: dict[str, Any] = {key: value}
+    strict = dataclasses.replace(prof, score=dataclasses.replace(prof.score, **change))
     tracker = Tracker(strict, site)
     steps = run_tracker(tracker, sc.stream())
     assert tracker.counters.get("reinit_challenged", 0) == 0
@@ -750,7 +755,7 @@ class OutboundScene(Scene):
     def uav(self, t: float) -> np.ndarray:
         out = 600.0 + 15.0 * min(max(0.0, t - 40.0), 100.0, max(0.0, 260.0 - t))
         a = 0.3 + 0.0005 * t
-        return self.r0 + np.array([out * math.cos(a), out * math.sin(a), 50.0])
+        return self.r0 + np.array([out * math.cos(a), out * math.sin(a), 50.0], dtype=np.float64)
 
     def far(self, p: np.ndarray) -> bool:
         return float(np.linalg.norm(p[:2] - self.r0[:2])) > 1500.0
@@ -817,7 +822,9 @@ def test_a_radar_mount_misalignment_is_corrected_with_the_sites_calibration(site
     plain = site.calibrated(exact)
     aligned = site.calibrated(dataclasses.replace(exact, az_bias_deg=2.0, el_bias_deg=1.0))
 
-    def mean_error(s: Site, items: list[RadarFrame | RfAttempt]) -> tuple[float, list]:  # type: ignore[type-arg]
+    def mean_error(
+        s: Site, items: list[RadarFrame | RfAttempt]
+    ) -> tuple[float, list[TrackerStep]]:
         steps = run_tracker(Tracker(profile, s), items)
         late = [s for s in steps if s.counted and s.t >= 30.0]
         assert len(late) > 500
@@ -893,7 +900,7 @@ def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
     fused."""
     sc = Scene(site, seed=7)
     sc.build(60.0)
-    frames = []
+    frames: list[RadarFrame] = []
     for f in sc.frames:
         if 30.0 <= f.t < 34.0 and f.tracks:  # the onboard track coasts for 4 s
             prev = frames[-1].tracks[0]
@@ -937,7 +944,7 @@ def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
 # --- the runner -----------------------------------------------------------------------------
 def _flight(scene: Scene) -> Flight:
     truth = [
-        TruthFix(t, 0.0, 0.0, 0.0, *map(float, p), (0.0, 0.0, 0.0), 6, 20)
+        TruthFix(t, 0.0, 0.0, 0.0, float(p[0]), float(p[1]), float(p[2]), (0.0, 0.0, 0.0), 6, 20)
         for t, p in sorted(scene.truth.items())
     ]
     return Flight("synthetic", truth, scene.frames, scene.fixes)
@@ -955,8 +962,8 @@ def test_run_flight_with_tracker_profiles(site: Site) -> None:
     assert res.info is not None and res.info.radar_reports == n_reports
     smooth = run_flight(fl, load_profile("tracker_smoothed"), site)
     assert [s.status for s in smooth.steps] == [s.status for s in res.steps]
-    e_f = [sc.error(s) for s in res.steps if s.counted]  # type: ignore[arg-type]
-    e_s = [sc.error(s) for s in smooth.steps if s.counted]  # type: ignore[arg-type]
+    e_f = [sc.error(s) for s in res.steps if s.counted]
+    e_s = [sc.error(s) for s in smooth.steps if s.counted]
     assert np.mean(e_s) < np.mean(e_f)
 
 

@@ -12,6 +12,7 @@ from filterpy.kalman import IMMEstimator, KalmanFilter
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import load_profile
+from uav_fusion.core.estimators.adaptive import CEP_PER_SIGMA
 from uav_fusion.core.estimators.imm import ImmFilter, packed_arrays
 from uav_fusion.core.estimators.kalman import CvFilter, pack_r
 from uav_fusion.core.estimators.models import (
@@ -22,7 +23,6 @@ from uav_fusion.core.estimators.models import (
     position_h,
 )
 from uav_fusion.core.estimators.parts import (
-    CEP_PER_SIGMA,
     CepRfR,
     Deleter,
     FixedRadarR,

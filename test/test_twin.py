@@ -13,13 +13,13 @@ import pytest
 from uav_fusion.cli import main as cli_main
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.site import load_site
+from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin.config import (
     DEFAULT_WAYPOINTS,
     load_twin_config,
     twin_config_from_dict,
 )
-from uav_fusion.core.twin.generate import generate_twin, twin_to_flight
+from uav_fusion.core.twin.generate import TwinFlight, generate_twin, twin_to_flight
 from uav_fusion.core.twin.rf_model import solve_tdoa_2d
 from uav_fusion.core.twin.trajectory import flight_plan_from_dict, load_flight_plan
 from uav_fusion.core.twin.writers import RF_HEADER, write_twin
@@ -29,12 +29,12 @@ NORTH_BOX = config_path("waypoints/lake_wheeler_north_box.yaml")
 
 
 @pytest.fixture(scope="module")
-def site():  # type: ignore[no-untyped-def]
+def site() -> Site:
     return load_site()
 
 
 @pytest.fixture(scope="module")
-def short_twin(site):  # type: ignore[no-untyped-def]
+def short_twin(site: Site) -> TwinFlight:
     """The default plan cut to 240 s (take-off, the radar loop, the start of the trip north)."""
     plan = load_flight_plan(config_path(DEFAULT_WAYPOINTS), site)
     return generate_twin(site, load_twin_config(), plan, seed=7, duration_s=240.0)
@@ -44,7 +44,7 @@ def _files(folder: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
 
 
-def test_same_seed_gives_identical_files(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_same_seed_gives_identical_files(site: Site, tmp_path: Path) -> None:
     plan = load_flight_plan(config_path(DEFAULT_WAYPOINTS), site)
     cfg = load_twin_config()
     for name, seed in (("a", 5), ("b", 5), ("c", 6)):
@@ -57,7 +57,7 @@ def test_same_seed_gives_identical_files(site, tmp_path: Path) -> None:  # type:
             assert a[name] != c[name], name
 
 
-def test_bundled_default_flight_is_what_the_code_generates(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_bundled_default_flight_is_what_the_code_generates(site: Site, tmp_path: Path) -> None:
     out = tmp_path / "regen"
     assert cli_main(["generate", "--out", str(out)]) == 0
     shipped = data_path(DEFAULT_FLIGHT)
@@ -79,7 +79,9 @@ def test_bundled_default_flight_is_what_the_code_generates(site, tmp_path: Path)
     np.testing.assert_allclose(fa, fb, rtol=0, atol=1e-4, equal_nan=True)
 
 
-def test_round_trip_through_files_reproduces_the_twin(short_twin, site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_round_trip_through_files_reproduces_the_twin(
+    short_twin: TwinFlight, site: Site, tmp_path: Path
+) -> None:
     write_twin(short_twin, tmp_path)
     loaded = load_flight(tmp_path, site, strict=True)
     mine = twin_to_flight(short_twin)
@@ -118,7 +120,7 @@ def test_round_trip_through_files_reproduces_the_twin(short_twin, site, tmp_path
         assert la.line == ma.line
 
 
-def test_files_follow_the_dataset_formats(short_twin, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_files_follow_the_dataset_formats(short_twin: TwinFlight, tmp_path: Path) -> None:
     paths = write_twin(short_twin, tmp_path)
     with paths["rf"].open(newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
@@ -151,7 +153,7 @@ def test_files_follow_the_dataset_formats(short_twin, tmp_path: Path) -> None:  
     assert len(nofix) == int((~short_twin.truth.valid).sum()) >= 3
 
 
-def test_cli_generates_another_plan_and_seed(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_cli_generates_another_plan_and_seed(site: Site, tmp_path: Path) -> None:
     out = tmp_path / "north"
     rc = cli_main(
         ["generate", "--seed", "11", "--waypoints", str(NORTH_BOX), "--out", str(out),
@@ -180,7 +182,7 @@ def test_cli_reports_bad_arguments(tmp_path: Path, capsys: pytest.CaptureFixture
     assert "none.yaml: waypoint file not found" in capsys.readouterr().err
 
 
-def test_flight_plan_validation(site) -> None:  # type: ignore[no-untyped-def]
+def test_flight_plan_validation(site: Site) -> None:
     ok = {"waypoints": [{"e": 0, "n": 0, "alt": 30}, {"lat": 35.73, "lon": -78.698, "alt": 40}]}
     plan = flight_plan_from_dict(ok, site)
     assert plan.waypoints[1].n == pytest.approx(277.0, abs=2.0)
@@ -204,7 +206,7 @@ def test_twin_config_validation() -> None:
     assert cfg.radar.sigma_az_deg == 2.0
 
 
-def test_flight_physics(short_twin) -> None:  # type: ignore[no-untyped-def]
+def test_flight_physics(short_twin: TwinFlight) -> None:
     tr = short_twin.traj
     air = tr.pos[:, 2] > tr.ground_u + 20.0
     speed = np.linalg.norm(tr.vel[air, :2], axis=1)
@@ -216,7 +218,7 @@ def test_flight_physics(short_twin) -> None:  # type: ignore[no-untyped-def]
     assert tr.t_takeoff == pytest.approx(55.0, abs=0.05)  # the plan's hold before take-off
 
 
-def test_tdoa_solver_recovers_exact_position(site) -> None:  # type: ignore[no-untyped-def]
+def test_tdoa_solver_recovers_exact_position(site: Site) -> None:
     S = np.array([t.enu for t in site.rf_sensor_towers()])
     for p in ([100.0, 200.0], [-300.0, 1200.0], [500.0, -100.0]):
         q = np.array([p[0], p[1], 40.0])
@@ -228,7 +230,7 @@ def test_tdoa_solver_recovers_exact_position(site) -> None:  # type: ignore[no-u
         assert np.all(np.isfinite(cov))
 
 
-def test_hold_at_a_waypoint_hovers_there(site) -> None:  # type: ignore[no-untyped-def]
+def test_hold_at_a_waypoint_hovers_there(site: Site) -> None:
     from uav_fusion.core.twin.config import FlightDynamics
     from uav_fusion.core.twin.trajectory import fly
 
@@ -258,7 +260,7 @@ def test_hold_at_a_waypoint_hovers_there(site) -> None:  # type: ignore[no-untyp
     "name",
     ["zigzag_dash", "west_leg", "out_and_back", "hover_notch", "low_pass", "high_altitude"],
 )
-def test_stress_plans_load_and_fly(site, name: str) -> None:  # type: ignore[no-untyped-def]
+def test_stress_plans_load_and_fly(site: Site, name: str) -> None:
     from uav_fusion.core.twin.config import FlightDynamics
     from uav_fusion.core.twin.trajectory import fly
 

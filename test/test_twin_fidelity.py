@@ -72,6 +72,7 @@ def test_rf_errors_and_the_nis_gate(bundled: Setup) -> None:
     assert (round(float(np.mean(acc_err)), 1), round(float(np.max(acc_err)), 1)) == (19.8, 58.6)
     # the paper accepted errors up to 113.9 m: an innovation variance about 4 times larger
     kept = {}
+    assert profile.r_rf is not None
     for scale in (4.0, 16.0):
         r2 = run_flight(flight, profile.with_changes(r_rf=profile.r_rf * scale), site)
         c2 = r2.paper_counts()

@@ -20,7 +20,7 @@ from uav_fusion.cli import main as cli_main
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.records import Flight, RadarTrack
-from uav_fusion.core.site import load_site
+from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin.config import load_twin_config, twin_config_from_dict
 from uav_fusion.core.twin.generate import TwinFlight, generate_twin
 from uav_fusion.core.twin.radar_model import BIRD, CLUTTER, GHOST, UAV, VEHICLE
@@ -30,14 +30,17 @@ from uav_fusion.resources import config_path
 
 LOW_PASS = config_path("waypoints/low_pass.yaml")
 
+# the busy scene: the twin, its flight as read back from the files, and their folder
+Busy = tuple[TwinFlight, Flight, Path]
+
 
 @pytest.fixture(scope="module")
-def site():  # type: ignore[no-untyped-def]
+def site() -> Site:
     return load_site()
 
 
 @pytest.fixture(scope="module")
-def busy(site, tmp_path_factory):  # type: ignore[no-untyped-def]
+def busy(site: Site, tmp_path_factory: pytest.TempPathFactory) -> Busy:
     plan = load_flight_plan(LOW_PASS, site)
     twin = generate_twin(
         site, load_twin_config(), plan, seed=101, duration_s=240.0, scene_scale=2.0
@@ -66,11 +69,17 @@ def _tracks_by_kind(twin: TwinFlight, flight: Flight) -> dict[str, dict[int, lis
     return out
 
 
-def _xyz(reps: list[RadarTrack]) -> np.ndarray:  # type: ignore[type-arg]
+def _xyz(reps: list[RadarTrack]) -> np.ndarray:
     return np.array([(r.e, r.n, r.u) for r in reps])
 
 
-def test_stationary_clutter_track_lasts_minutes_and_sometimes_looks_like_a_uav(busy) -> None:  # type: ignore[no-untyped-def]
+def _vel(r: RadarTrack) -> tuple[float, float, float]:
+    """A report's NED velocity: the twin's radar reports all carry one."""
+    assert r.vel_ned is not None
+    return r.vel_ned
+
+
+def test_stationary_clutter_track_lasts_minutes_and_sometimes_looks_like_a_uav(busy: Busy) -> None:
     twin, flight, _ = busy
     clutter = _tracks_by_kind(twin, flight)[CLUTTER]
     long_ones = [r for r in clutter.values() if r[-1].t - r[0].t >= 120.0]
@@ -78,7 +87,7 @@ def test_stationary_clutter_track_lasts_minutes_and_sometimes_looks_like_a_uav(b
     hits = 0
     for reps in long_ones:
         p = _xyz(reps)
-        speed = np.hypot([r.vel_ned[0] for r in reps], [r.vel_ned[1] for r in reps])
+        speed = np.hypot([_vel(r)[0] for r in reps], [_vel(r)[1] for r in reps])
         assert np.median(speed) < 1.5  # near-zero velocity
         # stays put on the map (its height wanders with the elevation noise far away)
         assert np.max(np.linalg.norm(p[:, :2] - np.median(p[:, :2], axis=0), axis=1)) < 150.0
@@ -88,7 +97,7 @@ def test_stationary_clutter_track_lasts_minutes_and_sometimes_looks_like_a_uav(b
     assert hits >= 1
 
 
-def test_uav_track_is_sometimes_classified_below_half(busy) -> None:  # type: ignore[no-untyped-def]
+def test_uav_track_is_sometimes_classified_below_half(busy: Busy) -> None:
     twin, flight, _ = busy
     uav = _tracks_by_kind(twin, flight)[UAV]
     assert uav
@@ -98,7 +107,7 @@ def test_uav_track_is_sometimes_classified_below_half(busy) -> None:  # type: ig
     assert np.any(probs < 0.5)
 
 
-def test_multipath_ghost_lies_below_the_uav(busy) -> None:  # type: ignore[no-untyped-def]
+def test_multipath_ghost_lies_below_the_uav(busy: Busy) -> None:
     twin, flight, _ = busy
     # the loaded reports whose track currently follows the UAV's multipath image
     labels = [[r.kind for r in f.tracks] for f in twin.radar_sim]
@@ -122,13 +131,13 @@ def test_multipath_ghost_lies_below_the_uav(busy) -> None:  # type: ignore[no-un
     assert mirrored >= 1
 
 
-def test_ground_vehicle_drives_along_a_road(busy) -> None:  # type: ignore[no-untyped-def]
+def test_ground_vehicle_drives_along_a_road(busy: Busy) -> None:
     twin, flight, _ = busy
     cars = _tracks_by_kind(twin, flight)[VEHICLE]
     roads = [np.asarray(r, dtype=float) for r in twin.config.vehicles.roads]
     ground = twin.traj.ground_u
 
-    def road_distance(xy: np.ndarray) -> float:  # type: ignore[type-arg]
+    def road_distance(xy: np.ndarray) -> float:
         best = np.inf
         for road in roads:
             for a, b in itertools.pairwise(road):
@@ -150,7 +159,7 @@ def test_ground_vehicle_drives_along_a_road(busy) -> None:  # type: ignore[no-un
     assert 0.0 <= twin.config.vehicles.height_m <= 2.0
 
 
-def test_bird_flock_small_and_erratic(busy) -> None:  # type: ignore[no-untyped-def]
+def test_bird_flock_small_and_erratic(busy: Busy) -> None:
     twin, flight, _ = busy
     birds = _tracks_by_kind(twin, flight)[BIRD]
     assert len(birds) >= 2
@@ -166,11 +175,11 @@ def test_bird_flock_small_and_erratic(busy) -> None:  # type: ignore[no-untyped-
     assert together
     # erratic: the heading of a long bird track turns by tens of degrees
     longest = max(birds.values(), key=len)
-    hd = np.unwrap(np.arctan2([r.vel_ned[1] for r in longest], [r.vel_ned[0] for r in longest]))
+    hd = np.unwrap(np.arctan2([_vel(r)[1] for r in longest], [_vel(r)[0] for r in longest]))
     assert np.ptp(hd) > np.radians(20.0)
 
 
-def test_rf_outage_gives_runs_of_failed_attempts(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_rf_outage_gives_runs_of_failed_attempts(site: Site, tmp_path: Path) -> None:
     doc = {"rf_outage": {"enter_prob": 0.08, "mean_run": 4.0}}
     cfg = twin_config_from_dict(doc)
     plan = load_flight_plan(LOW_PASS, site)
@@ -191,7 +200,7 @@ def test_rf_outage_gives_runs_of_failed_attempts(site, tmp_path: Path) -> None: 
     assert not any(a.attempt.reason == "no signal captured" for a in quiet.rf)
 
 
-def test_busy_scene_is_deterministic(busy, site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_busy_scene_is_deterministic(busy: Busy, site: Site, tmp_path: Path) -> None:
     _, _, first = busy
     plan = load_flight_plan(LOW_PASS, site)
     again = generate_twin(
@@ -203,7 +212,7 @@ def test_busy_scene_is_deterministic(busy, site, tmp_path: Path) -> None:  # typ
     assert a == b
 
 
-def test_scene_scale_from_the_command_line_and_the_plan(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_scene_scale_from_the_command_line_and_the_plan(site: Site, tmp_path: Path) -> None:
     counts = {}
     for k in ("0", "2"):
         out = tmp_path / k

@@ -21,7 +21,6 @@ from __future__ import annotations
 import os
 from collections import Counter
 
-import numpy as np
 import pytest
 
 from uav_fusion.core.estimators.selection import largest_track_id
@@ -74,7 +73,7 @@ def test_the_default_plan_meets_the_targets(seed: int) -> None:
     plan = load_flight_plan(config_path(DEFAULT_WAYPOINTS), site)
     tw = generate_twin(site, load_twin_config(), plan, seed=seed)
     flight = twin_to_flight(tw)
-    res = calibrate(flight, np.asarray(tw.site.radar.enu, dtype=float))
+    res = calibrate(flight, tw.site.radar.enu)
     lt = largest_track_id(flight.radar)
     kinds = Counter(r.kind for f in tw.radar_sim for r in f.tracks if r.track_id == lt)
     r = res.radar

@@ -104,7 +104,7 @@ def _level(tau: float) -> np.ndarray:
 
 def _climbing(tau: float) -> np.ndarray:
     """The same circuit, climbing steadily at 1 m/s from 40 m."""
-    return _level(tau) + np.array([0.0, 0.0, tau - 20.0])
+    return _level(tau) + np.array([0.0, 0.0, tau - 20.0], dtype=np.float64)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])

@@ -21,7 +21,7 @@ from uav_fusion.core.bench.sweep import spec_from_dict, sweep_tasks
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.scoring.calibration import angle_residuals
 from uav_fusion.core.scoring.fixed_rate import longest_run
-from uav_fusion.core.site import load_site
+from uav_fusion.core.site import Site, load_site
 from uav_fusion.core.twin.config import load_twin_config
 from uav_fusion.core.twin.generate import generate_twin, twin_to_flight
 from uav_fusion.core.twin.trajectory import load_flight_plan
@@ -40,7 +40,7 @@ ZIGZAG = config_path("waypoints/zigzag_dash.yaml")
 
 
 @pytest.fixture(scope="module")
-def site():  # type: ignore[no-untyped-def]
+def site() -> Site:
     return load_site()
 
 
@@ -105,7 +105,7 @@ PINNED = {
 }
 
 
-def test_a_flight_of_an_existing_plan_is_unchanged(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_a_flight_of_an_existing_plan_is_unchanged(site: Site, tmp_path: Path) -> None:
     plan = load_flight_plan(ZIGZAG, site)
     twin = generate_twin(site, load_twin_config(), plan, seed=201, duration_s=90.0)
     assert twin.world is None
@@ -123,7 +123,7 @@ def test_a_flight_of_an_existing_plan_is_unchanged(site, tmp_path: Path) -> None
     assert sum(a.e + a.n for a in ok) == pytest.approx(14.348, abs=0.01)
 
 
-def test_a_world_is_applied_and_recorded_with_the_flight(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_a_world_is_applied_and_recorded_with_the_flight(site: Site, tmp_path: Path) -> None:
     """A 3 deg mount misalignment shows in the reports' azimuth; the trajectory and the truth
     log are those of the same seed without a world."""
     doc = {"families": {"turned": {"description": "turned mount", "draw": {
@@ -158,7 +158,7 @@ def test_a_world_is_applied_and_recorded_with_the_flight(site, tmp_path: Path) -
     assert float(np.median(res.az_deg) - np.median(base.az_deg)) == pytest.approx(2.5, abs=0.5)
 
 
-def test_cep_nlos_weight_makes_the_cep_reflect_the_excess_paths(site) -> None:  # type: ignore[no-untyped-def]
+def test_cep_nlos_weight_makes_the_cep_reflect_the_excess_paths(site: Site) -> None:
     import dataclasses
 
     plan = load_flight_plan(ZIGZAG, site)
@@ -266,7 +266,7 @@ def test_bad_world_splits_stop_naming_the_file_and_key(
         load_definition(q)
 
 
-def test_cache_keys_and_folders_of_world_flights(site, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_cache_keys_and_folders_of_world_flights(site: Site, tmp_path: Path) -> None:
     d = load_definition(_tiny(tmp_path))
     a, b = cached_flights(d, "test", tmp_path / "c", SITE_FILE)
     assert a.flight.family == "narrow_fov" and b.flight.family == "false_uav_clutter"
@@ -310,7 +310,9 @@ def test_worlds_bench_and_sweep_end_to_end(
     trk = [r for r in rows if r["profile"] == "tracker"]
     worlds = {r["family"]: read_world(next(cache.glob(f"*{r['family']}*"))) for r in trk}
     for r in trk:
-        true = worlds[r["family"]]["radar_mount"]["az_bias_deg"]  # type: ignore[index]
+        world = worlds[r["family"]]
+        assert world is not None
+        true = world["radar_mount"]["az_bias_deg"]
         assert float(r["registration_az_true_deg"]) == pytest.approx(true, abs=1e-3)
         assert float(r["registration_az_bound_deg"]) >= float(r["registration_az_sigma_deg"])
     assert all(r["registration_az_true_deg"] == "" for r in rows if r["profile"] == "paper")
