@@ -16,6 +16,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from uav_fusion.ros.qos import stream_qos
+from uav_fusion.ros.stream import StreamNode
 
 T0 = 1759866140.0  # 2025-10-07T19:42:20Z
 
@@ -81,10 +82,10 @@ class StreamHarness:
     """One stream node plus a collector of ``topics`` and ``/diagnostics`` on one executor."""
 
     def __init__(
-        self, ctx: Context, cls: Callable[..., Node], topics: dict[str, type], **params: Any
+        self, ctx: Context, cls: Callable[..., StreamNode], topics: dict[str, type], **params: Any
     ) -> None:
         params.setdefault("diagnostics_period_s", 0.05)
-        self.node: Any = cls(
+        self.node = cls(
             context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()]
         )
         self.io = Node("collector", context=ctx)

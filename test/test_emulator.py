@@ -16,6 +16,7 @@ from uav_fusion.core.data.flight import flight_files
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.ingest.emulator import (
     Emulator,
+    SensorLine,
     TcpServerSink,
     plan,
     read_schedule,
@@ -32,7 +33,7 @@ def flight(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return write_flight(tmp_path_factory.mktemp("flight") / "f", seconds=20.0)
 
 
-def _lines(flight: Path) -> dict[str, list]:  # type: ignore[type-arg]
+def _lines(flight: Path) -> dict[str, list[SensorLine]]:
     site = load_site()
     files = flight_files(flight)
     return {s: read_sensor_lines(files[s], s, site) for s in ("radar", "rf", "truth")}
@@ -91,7 +92,12 @@ def test_tcp_client_late_and_reconnecting_loses_nothing(flight: Path, tmp_path: 
     c1.close()  # the client goes away
     rest = Emulator(sends[half:], {"radar": sink}, rate=0.0, wait_s=0.0)
     done = threading.Event()
-    threading.Thread(target=lambda: (rest.run(), done.set()), daemon=True).start()
+
+    def run_rest() -> None:
+        rest.run()
+        done.set()
+
+    threading.Thread(target=run_rest, daemon=True).start()
     assert done.wait(LIMIT_S)
     c2 = socket.create_connection(("127.0.0.1", sink.port), timeout=LIMIT_S)
     want_rest = b"".join(s.data for s in sends[half:])

@@ -11,6 +11,7 @@ from test_graph_flight import write_flight
 from uav_fusion.core.data import read_radar_jsonl, read_rf_csv, read_truth
 from uav_fusion.core.ingest.decode import StreamDecoder
 from uav_fusion.core.ingest.framing import LineFramer
+from uav_fusion.core.records import RadarFrame, RfAttempt
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
@@ -72,7 +73,7 @@ def test_bad_lines_are_counted_by_reason_and_never_raise() -> None:
     ]
     out = [r for line in lines for r in dec.decode(line)]
     assert len(out) == 2  # the good frame, and the frame whose only track was not finite
-    assert out[1].tracks == ()
+    assert isinstance(out[1], RadarFrame) and out[1].tracks == ()
     assert dict(dec.policy.dropped) == {
         "bad_json": 2,
         "not_object": 1,
@@ -91,11 +92,11 @@ def test_rf_stream_takes_a_header_when_it_comes_and_assumes_aadm_without() -> No
     dec = StreamDecoder("rf", load_site())
     row = "7,TDOA,2.44E+09,2.8E+07,16384,35.73,-78.698,0,0.93,45.2,4,4,0,\"LW2,LW3\",{t},"
     a = dec.decode(row.format(t="2025-10-07 19:42:20.000").encode())
-    assert a[0].meas_id == 7 and a[0].cep == 45.2
+    assert isinstance(a[0], RfAttempt) and a[0].meas_id == 7 and a[0].cep == 45.2
     # another column order, announced by a header line
     assert dec.decode(b"Time,Latitude,Longitude,Meas ID") == []
     b = dec.decode(b"2025-10-07 19:42:24.000,35.731,-78.699,8")
-    assert b[0].meas_id == 8 and b[0].cep is None
+    assert isinstance(b[0], RfAttempt) and b[0].meas_id == 8 and b[0].cep is None
     assert dec.decode(b"Meas ID,Foo") == []  # a header without the required columns
     assert dec.policy.dropped["bad_header"] == 1 and dec.headers == 1
 

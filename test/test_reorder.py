@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from uav_fusion.core.live.pipeline import Batch, ReorderBuffer
+from uav_fusion.core.live.reorder import Batch, ReorderBuffer
 
 # (source, t, label): radar frames at 0.25 s (two candidates at t = 1.0), RF at ~3.9 s
 STREAMS = {
@@ -32,7 +32,7 @@ def _interleave(seed: int, max_delay: float) -> list[tuple[str, float, str]]:
     """A random merge of the FIFO streams: each item is delayed by up to ``max_delay``
     seconds, and each stream keeps its own order."""
     rng = random.Random(seed)
-    arrivals = []
+    arrivals: list[tuple[float, int, tuple[str, float, str]]] = []
     for stream in _sorted_streams().values():
         last = -1.0
         for e in stream:

@@ -6,16 +6,17 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import replace
-from typing import Any
 
 import pytest
 
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.estimators import load_profile, make_estimator
-from uav_fusion.core.estimators.base import drive
+from uav_fusion.core.estimators.base import Estimator, drive
+from uav_fusion.core.estimators.multi import MultiTracker
+from uav_fusion.core.estimators.steps import Step
 from uav_fusion.core.live.rewind import Rewinder, simulate
 from uav_fusion.core.live.schedule import CLOCK, ClockTick
-from uav_fusion.core.records import RADAR, RF, RadarFrame, RfAttempt
+from uav_fusion.core.records import RADAR, RF, Flight, RadarFrame, RfAttempt
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
@@ -23,7 +24,7 @@ SPAN_S = 300.0
 
 
 @pytest.fixture(scope="module")
-def flight():  # type: ignore[no-untyped-def]
+def flight() -> Flight:
     return load_flight(data_path(DEFAULT_FLIGHT), load_site(None))
 
 
@@ -41,12 +42,12 @@ def _arrivals(
     return [(src, it) for _, _, src, it in keyed]
 
 
-def _key(s):  # type: ignore[no-untyped-def]
+def _key(s: Step) -> tuple[object, ...]:
     return (s.t, s.source, s.status, s.reason, repr(s.values))  # repr: NaN equals NaN
 
 
 @pytest.mark.parametrize("profile", ["paper", "tracker", "tracker_smoothed"])
-def test_rf_three_seconds_late_gives_the_in_order_track(flight, profile: str) -> None:  # type: ignore[no-untyped-def]
+def test_rf_three_seconds_late_gives_the_in_order_track(flight: Flight, profile: str) -> None:
     prof = load_profile(profile)
     site = load_site(None)
     est = make_estimator(prof, site, live=True)
@@ -54,31 +55,33 @@ def test_rf_three_seconds_late_gives_the_in_order_track(flight, profile: str) ->
     in_order = drive(make_estimator(prof, site, live=True), items).steps
     arrivals = _arrivals(items, 3.0, 1.0, seed=7)
     assert [it for _, it in arrivals] != items  # the schedule does reorder
-    outs, rw, _ = simulate(lambda: make_estimator(prof, site, live=True), arrivals)
+    outs, rw, _ = simulate(lambda: make_estimator(prof, site, live=True), list(arrivals))
     final = rw.steps
     assert [_key(s) for s in final] == [_key(s) for s in in_order]
     # every input's own step was passed on once, at its arrival
     assert sum(len(o.steps) for o in outs) == len(in_order)
 
 
-def test_multi_uav_tracks_after_late_rf_equal_the_in_order_ones(flight) -> None:  # type: ignore[no-untyped-def]
+def test_multi_uav_tracks_after_late_rf_equal_the_in_order_ones(flight: Flight) -> None:
     prof = load_profile("tracker")
     site = load_site(None)
     est = make_estimator(prof, site, kind="multi")
     items = [it for it in est.flight_input(flight) if it.t < flight.radar[0].t + SPAN_S]
     ref = make_estimator(prof, site, kind="multi")
+    assert isinstance(ref, MultiTracker)
     drive(ref, items)
     rw = Rewinder(make_estimator(prof, site, kind="multi"), max_lag_s=10.0)
     for src, it in _arrivals(items, 3.0, 1.0, seed=3):
         assert rw.fuse(src, it.t, it) is not None
     t = items[-1].t
-    got = [(o.track_id, o.x.tolist()) for o in rw.estimator.outputs(t)]  # type: ignore[attr-defined]
-    want = [(o.track_id, o.x.tolist()) for o in ref.outputs(t)]  # type: ignore[attr-defined]
+    assert isinstance(rw.estimator, MultiTracker)
+    got = [(o.track_id, o.x.tolist()) for o in rw.estimator.outputs(t)]
+    want = [(o.track_id, o.x.tolist()) for o in ref.outputs(t)]
     assert got == want and got
     assert rw.rewinds > 0
 
 
-def test_max_lag_is_the_boundary_of_what_is_refiltered(flight) -> None:  # type: ignore[no-untyped-def]
+def test_max_lag_is_the_boundary_of_what_is_refiltered(flight: Flight) -> None:
     prof = load_profile("tracker")
     est = make_estimator(prof, load_site(None), live=True)
     items = [it for it in est.flight_input(flight) if isinstance(it, RadarFrame)][:200]
@@ -96,7 +99,7 @@ def test_max_lag_is_the_boundary_of_what_is_refiltered(flight) -> None:  # type:
     assert rw.rewinds == before + 1
 
 
-def test_a_second_message_of_a_fused_radar_stamp_joins_its_frame(flight) -> None:  # type: ignore[no-untyped-def]
+def test_a_second_message_of_a_fused_radar_stamp_joins_its_frame(flight: Flight) -> None:
     prof = load_profile("paper").with_changes(radar_selection="online")
     site = load_site(None)
     est = make_estimator(prof, site, live=True)
@@ -109,7 +112,7 @@ def test_a_second_message_of_a_fused_radar_stamp_joins_its_frame(flight) -> None
     assert [_key(s) for s in rw.steps] == [_key(s) for s in whole]
 
 
-def test_a_clock_move_that_publishes_nothing_changes_nothing(flight) -> None:  # type: ignore[no-untyped-def]
+def test_a_clock_move_that_publishes_nothing_changes_nothing(flight: Flight) -> None:
     """The fusion node's clock moves the fixed-rate output on between inputs, and its arrival
     schedule keeps only the moves that published an epoch. So a move that published none
     must leave the estimator as it was: an input older than the move (an RF fix that came
@@ -129,7 +132,7 @@ def test_a_clock_move_that_publishes_nothing_changes_nothing(flight) -> None:  #
             clock += rng.uniform(0.0, 0.2)
             live.append((CLOCK, ClockTick(clock)))
 
-    def make() -> Any:
+    def make() -> Estimator:
         return make_estimator(prof, site, 10.0, live=True)
 
     outs, _, _ = simulate(make, live)

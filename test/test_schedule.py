@@ -14,15 +14,22 @@ from uav_fusion.cli import main
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import ConfigError, DataError
 from uav_fusion.core.estimators import load_profile, make_estimator
+from uav_fusion.core.estimators.base import Estimator, Input
 from uav_fusion.core.live.rewind import simulate
-from uav_fusion.core.live.schedule import delayed, parse_delay, read_schedule, write_schedule
+from uav_fusion.core.live.schedule import (
+    Arrival,
+    delayed,
+    parse_delay,
+    read_schedule,
+    write_schedule,
+)
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.site import load_site
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
 
 
 @pytest.fixture(scope="module")
-def items():  # type: ignore[no-untyped-def]
+def items() -> list[Input]:
     site = load_site(None)
     flight = load_flight(data_path(DEFAULT_FLIGHT), site)
     est = make_estimator(load_profile("tracker"), site, live=True)
@@ -37,7 +44,7 @@ def test_parse_delay_reads_mean_and_jitter_and_names_bad_ones() -> None:
             parse_delay(bad)
 
 
-def test_delayed_keeps_each_source_in_its_order_and_reorders_across(items) -> None:  # type: ignore[no-untyped-def]
+def test_delayed_keeps_each_source_in_its_order_and_reorders_across(items: list[Input]) -> None:
     arr = delayed(items, {RF: (3.0, 1.0)}, seed=4)
     assert sorted(id(it) for _, it in arr) == sorted(id(it) for it in items)
     for src in (RADAR, RF):
@@ -46,7 +53,7 @@ def test_delayed_keeps_each_source_in_its_order_and_reorders_across(items) -> No
     assert [it for _, it in arr] != items
 
 
-def test_a_written_schedule_reads_back_in_arrival_order(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_a_written_schedule_reads_back_in_arrival_order(items: list[Input], tmp_path: Path) -> None:
     arr = delayed(items, {RF: (2.0, 0.5)}, seed=1)
     rows = [(src, it.t, n * 0.1) for n, (src, it) in enumerate(arr)]
     path = write_schedule(tmp_path / "arrivals.csv", reversed(rows))  # file order does not count
@@ -54,7 +61,7 @@ def test_a_written_schedule_reads_back_in_arrival_order(items, tmp_path: Path) -
     assert [id(it) for _, it in back] == [id(it) for _, it in arr]
 
 
-def test_schedule_errors_name_the_file_and_line(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_schedule_errors_name_the_file_and_line(items: list[Input], tmp_path: Path) -> None:
     p = tmp_path / "s.csv"
     p.write_text("source,stamp,arrival\nrf,1.5,2.0\n", encoding="utf-8")
     with pytest.raises(DataError, match=r"s\.csv.*2.*no rf input"):
@@ -88,9 +95,11 @@ def test_run_rejects_a_bad_delay(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--delay 'rf=soon'" in capsys.readouterr().err
 
 
-def test_simulated_schedule_equals_feeding_a_pipeline_message_by_message(items) -> None:  # type: ignore[no-untyped-def]
+def test_simulated_schedule_equals_feeding_a_pipeline_message_by_message(
+    items: list[Input],
+) -> None:
     from uav_fusion.core.live.pipeline import Pipeline, PipelineConfig
-    from uav_fusion.core.records import RadarFrame
+    from uav_fusion.core.records import RadarFrame, RfAttempt
 
     site = load_site(None)
     prof = load_profile("tracker")
@@ -99,14 +108,20 @@ def test_simulated_schedule_equals_feeding_a_pipeline_message_by_message(items) 
     pipe = Pipeline(make_estimator(prof, site, 10.0, live=True), PipelineConfig())
     got = []
     for _src, it in arr:
-        got.append(pipe.radar(it) if isinstance(it, RadarFrame) else pipe.rf([it]))
+        if isinstance(it, RadarFrame):
+            got.append(pipe.radar(it))
+        else:
+            assert isinstance(it, RfAttempt)  # delayed() schedules the inputs only
+            got.append(pipe.rf([it]))
     got.append(pipe.flush())
     key = [(s.t, s.status, repr(s.values)) for o in outs for s in o.steps]
     assert key == [(s.t, s.status, repr(s.values)) for o in got for s in o.steps]
     assert [g.k for o in outs for g in o.grid] == [g.k for o in got for g in o.grid]
 
 
-def test_the_nodes_arrival_log_has_one_row_per_radar_frame(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_the_nodes_arrival_log_has_one_row_per_radar_frame(
+    items: list[Input], tmp_path: Path
+) -> None:
     from uav_fusion.ros.fusion_input import ArrivalLog
 
     # the paper's radar/pose brings a frame's candidates one message each, back to back
@@ -121,7 +136,9 @@ def test_the_nodes_arrival_log_has_one_row_per_radar_frame(items, tmp_path: Path
     assert [id(it) for _, it in back] == [id(it) for it in items]
 
 
-def test_a_clock_row_publishes_epochs_before_a_late_input(items, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+def test_a_clock_row_publishes_epochs_before_a_late_input(
+    items: list[Input], tmp_path: Path
+) -> None:
     """An RF fix arrives 0.3 s late, after the node's clock moved the output past its stamp:
     the epochs up to the clock's time are published from the track without the fix (what a
     live node did), and differ from those an in-order run publishes after the fix."""
@@ -130,7 +147,7 @@ def test_a_clock_row_publishes_epochs_before_a_late_input(items, tmp_path: Path)
     site = load_site(None)
     prof = load_profile("tracker")
 
-    def make():  # type: ignore[no-untyped-def]
+    def make() -> Estimator:
         return make_estimator(prof, site, 10.0, live=True)
 
     steps = simulate(make, [(RADAR if not hasattr(it, "ok") else RF, it) for it in items])[1].steps
@@ -143,7 +160,7 @@ def test_a_clock_row_publishes_epochs_before_a_late_input(items, tmp_path: Path)
     late = [x for x in later if x[1].t <= tick.t]
     rest = [x for x in later if x[1].t > tick.t]
     live = [*before, *late, (CLOCK, tick), (RF, fix), *rest]
-    in_order = [*before, (RF, fix), *late, *rest]
+    in_order: list[Arrival] = [*before, (RF, fix), *late, *rest]
     outs, _, _ = simulate(make, live)
     at_tick = outs[len(before) + len(late)].grid
     assert at_tick and all(fix.t < g.t <= tick.t for g in at_tick)

@@ -22,6 +22,7 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import NavSatFix, PointCloud2
 
+from uav_fusion.core.ingest.transport import UdpReceiver
 from uav_fusion.nodes.radar_stream import RadarStream
 from uav_fusion.nodes.rf_stream import RfStream
 from uav_fusion.nodes.truth_stream import TruthStream
@@ -156,7 +157,9 @@ def test_ten_malformed_lines_in_a_row(ctx: Context) -> None:
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         h.spin_until(lambda: h.node.started)
-        port = h.node.ingest.transport.port
+        udp = h.node.ingest.transport
+        assert isinstance(udp, UdpReceiver)  # the url's scheme chose it
+        port = udp.port
         good = [radar_line(T0 + k) for k in (0, 1, 10, 11)]
         bad = [
             b"{this is not json\n",
@@ -174,7 +177,10 @@ def test_ten_malformed_lines_in_a_row(ctx: Context) -> None:
         for k, d in enumerate([*good[:2], *bad, *good[2:]]):
             tx.sendto(d, ("127.0.0.1", port))
             # one datagram in flight at a time: UDP may reorder or drop under load
-            h.spin_until(lambda k=k: h.node.ingest.transport.stats.datagrams == k + 1)
+            def taken(k: int = k) -> bool:
+                return h.node.ingest.transport.stats.datagrams == k + 1
+
+            h.spin_until(taken)
         # 14 datagrams, 13 lines (the long one is never a line); the NaN frame is kept empty
         v = h.settled(lines=13)
         clouds = h.got["radar/tracks"]
@@ -215,7 +221,10 @@ def test_sensor_clock_five_seconds_off(ctx: Context, tmp_path: Path) -> None:
                 f.write(f'{k},-78.6980,35.7300,45.0,"(0,0,0)","(1,0,0)",15.8,{stamp},6,22\n'
                         .encode())
                 f.flush()
-                h.spin_until(lambda k=k: len(h.got["truth/fix"]) == k + 1)
+                def published(k: int = k) -> bool:
+                    return len(h.got["truth/fix"]) == k + 1
+
+                h.spin_until(published)
         v = h.settled(lines=5)
         off = float(v["clock_offset_s"])
         assert 4.99 < off < 6.0, off  # 5 s plus the time to notice the line
