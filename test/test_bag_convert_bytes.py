@@ -56,6 +56,7 @@ def _rclpy_stream() -> list[tuple[str, int, bytes]]:
     flight = load_flight(data_path(DEFAULT_FLIGHT), site)
     prof = radar_profile("paper")
     R = prof.r_radar
+    assert R is not None
     frame = site.frame_id
     items: list[tuple[float, int, str, Any]] = []
     for group in selected_radar(flight, prof, site):

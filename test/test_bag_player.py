@@ -24,6 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.utilities import try_shutdown
 from rosgraph_msgs.msg import Clock
 
 from uav_fusion.bag.reader import BagReader
@@ -63,7 +64,7 @@ def ros() -> Iterator[None]:
     try:
         yield
     finally:
-        rclpy.try_shutdown()
+        try_shutdown()
 
 
 @dataclass
@@ -82,13 +83,15 @@ def sink(topics: dict[str, Any], clock: bool = False) -> Sink:
     s = Sink(Node("sink"))
     qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
     for name, cls in topics.items():
-        s.node.create_subscription(
-            cls, name, lambda d, n=name: s.got.append((n, time.monotonic(), d)), qos, raw=True
-        )
+        def record(d: bytes, n: str = name) -> None:
+            s.got.append((n, time.monotonic(), d))
+
+        s.node.create_subscription(cls, name, record, qos, raw=True)
     if clock:
-        s.node.create_subscription(
-            Clock, "/clock",
-            lambda m: s.clock.append(m.clock.sec * 1_000_000_000 + m.clock.nanosec), qos)
+        def on_clock(m: Clock) -> None:
+            s.clock.append(m.clock.sec * 1_000_000_000 + m.clock.nanosec)
+
+        s.node.create_subscription(Clock, "/clock", on_clock, qos)
     return s
 
 
@@ -304,7 +307,7 @@ def test_command_line_plays_a_bag(tmp_path: Path) -> None:
             ex.spin_once(timeout_sec=0.05)
         ex.shutdown()
     finally:
-        rclpy.try_shutdown()
+        try_shutdown()
     assert proc.returncode == 0, out
     assert received == [point(0), point(1), point(2)]
     assert "played 3 messages" in out[0]

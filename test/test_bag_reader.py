@@ -37,9 +37,14 @@ def point(i: int) -> bytes:
 
 
 def make_bag(
-    path: Path, n: int = 50, step_ns: int = 100_000_000, flush_every: int = 0, **split: float
+    path: Path,
+    n: int = 50,
+    step_ns: int = 100_000_000,
+    flush_every: int = 0,
+    max_bytes: int = 0,
+    max_duration_s: float = 0.0,
 ) -> Path:
-    w = BagWriter(path, **split)  # type: ignore[arg-type]
+    w = BagWriter(path, max_bytes=max_bytes, max_duration_s=max_duration_s)
     w.add_topic("/a", PS)
     w.add_topic("/b", PS)
     for i in range(n):
@@ -91,10 +96,13 @@ def test_metadata_is_rosbag2_v9_mcap_with_jazzy_hashes(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("split", "files"), [({"max_bytes": 600}, 5), ({"max_duration_s": 1.0}, 5)]
+    ("max_bytes", "max_duration_s", "files"), [(600, 0.0, 5), (0, 1.0, 5)]
 )
-def test_split_bags_hold_every_message(tmp_path: Path, split: dict[str, float], files: int) -> None:
-    bag = make_bag(tmp_path / "s", n=50, **split)  # 50 msgs x ~60 B; 5 s of bag time
+def test_split_bags_hold_every_message(
+    tmp_path: Path, max_bytes: int, max_duration_s: float, files: int
+) -> None:
+    # 50 msgs x ~60 B; 5 s of bag time
+    bag = make_bag(tmp_path / "s", n=50, max_bytes=max_bytes, max_duration_s=max_duration_s)
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert len(info["relative_file_paths"]) == files
     assert sum(f["message_count"] for f in info["files"]) == 50
@@ -110,14 +118,18 @@ def test_two_independent_readers_agree(tmp_path: Path) -> None:
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys.stores.ros2_jazzy import (
+        geometry_msgs__msg__PointStamped as RosbagsPointStamped,
+    )
 
     bag = make_bag(tmp_path / "b")
     store = get_typestore(Stores.ROS2_JAZZY)
+    a: list[tuple[str, int, float]] = []
     with Reader(bag) as rd:
-        a = [
-            (c.topic, ts, store.deserialize_cdr(raw, c.msgtype).point.x)
-            for c, ts, raw in rd.messages()
-        ]
+        for c, ts, raw in rd.messages():
+            m = store.deserialize_cdr(raw, c.msgtype)
+            assert isinstance(m, RosbagsPointStamped)
+            a.append((c.topic, ts, m.point.x))
     b = []
     with (bag / "b_0.mcap").open("rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
@@ -334,6 +346,7 @@ def test_convert_flight_writes_what_the_replay_nodes_publish(tmp_path: Path) -> 
         assert (got_a.t, got_a.ok, got_a.cep, got_a.valid_sensors, got_a.center_freq_hz) == (
             a.t, a.ok, a.cep, a.valid_sensors, a.center_freq_hz,
         )
+    assert res.radar_cov is not None and prof.r_radar is not None
     assert np.array_equal(res.radar_cov, prof.r_radar)
     poses = [
         deserialize_message(m.data, PoseWithCovarianceStamped)

@@ -23,6 +23,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import HistoryPolicy, QoSProfile
+from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import NavSatFix
 
 from uav_fusion.bag.reader import BagReader
@@ -36,7 +37,7 @@ def ros() -> Iterator[None]:
     try:
         yield
     finally:
-        rclpy.try_shutdown()
+        try_shutdown()
 
 
 def point_msg(i: int) -> PointStamped:
@@ -103,6 +104,10 @@ def test_every_message_is_recorded_and_readers_agree(ros: None, tmp_path: Path) 
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys.stores.ros2_jazzy import (
+        geometry_msgs__msg__PointStamped as RosbagsPointStamped,
+    )
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__NavSatFix as RosbagsNavSatFix
 
     out, src, ns = record(tmp_path, 600, 60)
     rf, truth = f"{ns}/rf/fix", f"{ns}/truth/fix"
@@ -116,8 +121,12 @@ def test_every_message_is_recorded_and_readers_agree(ros: None, tmp_path: Path) 
     with Reader(out) as rd:
         for c, _ts, raw in rd.messages():
             m = store.deserialize_cdr(raw, c.msgtype)
-            a.append((c.topic, (m.point.x, m.point.y, m.point.z) if c.topic == rf
-                       else (m.latitude, m.longitude, m.altitude)))
+            if c.topic == rf:
+                assert isinstance(m, RosbagsPointStamped)
+                a.append((c.topic, (m.point.x, m.point.y, m.point.z)))
+            else:
+                assert isinstance(m, RosbagsNavSatFix)
+                a.append((c.topic, (m.latitude, m.longitude, m.altitude)))
     # reader 2: mcap + mcap-ros2-support, decoding from the definitions stored in the file
     b: list[tuple[str, Any]] = []
     for f in sorted(out.glob("*.mcap")):

@@ -29,6 +29,10 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+from rosbags.typesys.stores.ros2_jazzy import (
+    geometry_msgs__msg__PointStamped as RosbagsPointStamped,
+)
 
 from uav_fusion.bag.reader import BagReader
 from uav_fusion.bag.reindex import reindex
@@ -72,10 +76,17 @@ def readable(bag: Path) -> int:
         return n
 
 
+def point_x(store: Typestore, raw: bytes | memoryview, msgtype: str) -> float:
+    """``point.x`` of a PointStamped as rosbags decodes it."""
+    m = store.deserialize_cdr(raw, msgtype)
+    assert isinstance(m, RosbagsPointStamped)
+    return m.point.x
+
+
 def xs_rosbags(bag: Path) -> list[float]:
     store = get_typestore(Stores.ROS2_JAZZY)
     with Reader(bag) as r:
-        return [store.deserialize_cdr(raw, c.msgtype).point.x for c, _t, raw in r.messages()]
+        return [point_x(store, raw, c.msgtype) for c, _t, raw in r.messages()]
 
 
 def xs_seeking(bag: Path) -> list[float]:
@@ -85,7 +96,7 @@ def xs_seeking(bag: Path) -> list[float]:
     for f in files:
         with f.open("rb") as fh:
             for _s, _c, m in SeekingReader(fh).iter_messages():
-                out.append(store.deserialize_cdr(m.data, PS).point.x)
+                out.append(point_x(store, m.data, PS))
     return out
 
 
@@ -166,8 +177,11 @@ def test_recorder_killed_then_reindexed(ctx: Context, tmp_path: Path) -> None:
     # and the bag player plays all of it
     got: list[float] = []
     sink = Node("sink", context=ctx)
-    sink.create_subscription(PointStamped, topic, lambda m: got.append(m.point.x),
-                             QoSProfile(depth=10000))
+
+    def on_point(m: PointStamped) -> None:
+        got.append(m.point.x)
+
+    sink.create_subscription(PointStamped, topic, on_point, QoSProfile(depth=10000))
     player = BagPlayer(str(bag), context=ctx, parameter_overrides=[
         Parameter("rate", value=1000.0), Parameter("publish_clock", value=False)])
     ex2 = SingleThreadedExecutor(context=ctx)
@@ -192,6 +206,7 @@ def test_file_cut_mid_chunk_keeps_its_whole_chunks(tmp_path: Path) -> None:
         if i % 100 == 99:
             w.flush()  # chunks of 100 messages on disk
     part = tmp_path / "b" / "b_0" / "b_0.mcap"
+    assert w._writer is not None
     w._writer.storage.bio.flush()  # what a kill leaves: the flushed chunks and no more
     data = part.read_bytes()
     w.abort()

@@ -43,8 +43,8 @@ def test_every_report_and_attempt_of_the_flight_round_trips(site: Site) -> None:
     for fr in flight.radar:
         got, dropped = cv.msg_to_radar_frame(_wire(cv.radar_frame_to_cloud_msg(fr, FRAME, cov)))
         assert not dropped and got.t == fr.t and len(got.tracks) == len(fr.tracks)
-        for a, b in zip(fr.tracks, got.tracks, strict=True):
-            assert all(getattr(a, k) == getattr(b, k) for k in RADAR_KEYS)
+        for sent, back in zip(fr.tracks, got.tracks, strict=True):
+            assert all(getattr(sent, k) == getattr(back, k) for k in RADAR_KEYS)
             n += 1
     assert n == sum(len(fr.tracks) for fr in flight.radar) > 1000
     for a in flight.rf:
@@ -62,6 +62,7 @@ def test_the_published_covariance_is_the_profiles_radar_model(site: Site) -> Non
     paper = report_covariance(load_profile("paper"), site)
     tracker = report_covariance(load_profile("tracker"), site)
     R = load_profile("paper").r_radar
+    assert R is not None
     assert tuple(paper(100.0, 200.0, 50.0)) == pytest.approx(
         (R[0, 0], R[0, 1], R[0, 2], R[1, 1], R[1, 2], R[2, 2])
     )

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from sensor_msgs.msg import NavSatStatus
 
 from uav_fusion.core.records import RADAR, RF, Measurement, RfAttempt, TruthFix
@@ -73,10 +75,12 @@ def test_radar_default_R_used_when_measurement_has_none() -> None:
         (lambda m: setattr(m.header, "stamp", Time()), "zero_stamp"),
     ],
 )
-def test_radar_bad_messages_rejected_with_reason(mutate: object, reason: str) -> None:
+def test_radar_bad_messages_rejected_with_reason(
+    mutate: Callable[[PoseWithCovarianceStamped], object], reason: str
+) -> None:
     m = Measurement(t=T0, source=RADAR, z=np.array([1.0, 2.0, 3.0]), R=np.eye(3))
     msg = cv.radar_measurement_to_msg(m, "enu")
-    mutate(msg)  # type: ignore[operator]
+    mutate(msg)
     with pytest.raises(cv.MessageError) as info:
         cv.msg_to_radar_measurement(msg, "enu")
     assert info.value.reason == reason
@@ -159,7 +163,8 @@ def test_scalar_covariance_check_decides_like_numpy() -> None:
     n_ok = 0
     for c in cases:
         try:
-            check_cov3(*c.reshape(-1).tolist(), what="x")
+            (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = c.tolist()
+            check_cov3(c00, c01, c02, c10, c11, c12, c20, c21, c22, what="x")
             ours = True
         except MessageError as exc:
             assert exc.reason == "bad_covariance"

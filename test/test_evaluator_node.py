@@ -19,6 +19,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import try_shutdown
 from sensor_msgs.msg import NavSatFix
 from std_srvs.srv import Trigger
 
@@ -111,7 +112,7 @@ def ros() -> Iterator[None]:
     try:
         yield
     finally:
-        rclpy.try_shutdown()
+        try_shutdown()
 
 
 def spin_until(ex: SingleThreadedExecutor, cond: Callable[[], bool], timeout: float = 20.0) -> None:

@@ -123,7 +123,10 @@ def _feed(h: Harness, order: list[tuple[str, Any]]) -> None:
             # Let the node take them. The executor takes one message per subscription in
             # turn, so between two topics the skew of arrival is bounded by what is queued:
             # a few messages (< 1 s of sensor time) here, like the replay's batch span.
-            h.spin_until(lambda i=i: sum(h.fusion.received.values()) >= i + 1)
+            def taken(i: int = i) -> bool:
+                return sum(h.fusion.received.values()) >= i + 1
+
+            h.spin_until(taken)
 
 
 def _shuffled_streams(

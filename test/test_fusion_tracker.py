@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import random
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,8 +29,8 @@ from uav_fusion.core.estimators.offline import run_tracker, smooth_steps
 from uav_fusion.core.estimators.selection import frames_input
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.live.rewind import simulate
-from uav_fusion.core.live.schedule import ClockTick, read_schedule
-from uav_fusion.core.records import RadarFrame, RadarTrack
+from uav_fusion.core.live.schedule import Arrival, ClockTick, read_schedule
+from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import load_site
 from uav_fusion.nodes.fusion_node import FusionNode
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
@@ -39,6 +40,8 @@ from uav_fusion.ros.qos import stream_qos
 
 FRAME = "enu_lw1"
 SPAN_S = 240.0  # the first four minutes of the bundled flight: take-off, first track, legs
+# radar frames, RF attempts, and the offline tracker's stream of them
+FlightData = tuple[list[RadarFrame], list[RfAttempt], list[RadarFrame | RfAttempt]]
 
 
 class Harness:
@@ -79,7 +82,10 @@ class Harness:
         for i, (kind, msg) in enumerate(order):
             (self.pub_radar if kind == "radar" else self.pub_rf).publish(msg)
             if i % 5 == 4:
-                self.spin_until(lambda i=i: self.got() >= i + 1)
+                def taken(i: int = i) -> bool:
+                    return self.got() >= i + 1
+
+                self.spin_until(taken)
 
     def got(self) -> int:
         return int(self.fusion.received["radar"] + self.fusion.received["rf"])
@@ -90,7 +96,7 @@ class Harness:
 
 
 @pytest.fixture(scope="module")
-def flight_data() -> tuple[list[Any], list[Any], list[Any]]:
+def flight_data() -> FlightData:
     """(radar frames, RF attempts) of the first SPAN_S of the bundled flight, and the
     offline tracker's stream over the same data."""
     site = load_site()
@@ -103,8 +109,12 @@ def flight_data() -> tuple[list[Any], list[Any], list[Any]]:
 
 
 def _order(
-    frames: list[Any], attempts: list[Any], delay_s: float, seed: int, min_delay_s: float = 0.0
-) -> list[Any]:
+    frames: list[RadarFrame],
+    attempts: list[RfAttempt],
+    delay_s: float,
+    seed: int,
+    min_delay_s: float = 0.0,
+) -> list[tuple[str, PointCloud2]]:
     """Both streams as messages, interleaved; RF ``min_delay_s`` to ``delay_s`` late (its own
     order kept)."""
     rng = random.Random(seed)
@@ -120,7 +130,7 @@ def _order(
 
 @pytest.mark.parametrize(("delay_s", "seed"), [(0.0, 0), (1.5, 1)])
 def test_live_tracker_equals_the_offline_run_and_its_grid(
-    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]], delay_s: float, seed: int
+    ctx: Context, flight_data: FlightData, delay_s: float, seed: int
 ) -> None:
     frames, attempts, stream = flight_data
     site = load_site()
@@ -169,7 +179,9 @@ def _key(s: Any) -> tuple[Any, ...]:
 
 
 def test_zero_wait_rf_seconds_late_final_track_equals_in_order_and_live_equals_offline(
-    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+    ctx: Context,
+    flight_data: FlightData,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """RF 3 s +- 1 s late, zero wait: every input is fused on arrival; after the last one
     the re-filtered track is the in-order run's, and what the node published equals the
@@ -181,16 +193,16 @@ def test_zero_wait_rf_seconds_late_final_track_equals_in_order_and_live_equals_o
     h = Harness(ctx, idle_flush_s=0.0, stall_timeout_s=0.0)
     pipe = h.fusion.pipeline
     assert pipe.rewinder is not None  # zero wait is the default
-    arrivals: list[tuple[str, Any]] = []
+    arrivals: list[Arrival] = []
     radar_in, rf_in, publish = pipe.radar, pipe.rf, h.fusion.output.publish
     published: list[Outputs] = []
 
-    def radar(frame: Any, clock: float | None = None) -> Outputs:
+    def radar(frame: RadarFrame, clock: float | None = None) -> Outputs:
         if frame.tracks:
             arrivals.append(("radar", frame))
         return radar_in(frame, clock)
 
-    def rf(atts: Any, clock: float | None = None) -> Outputs:
+    def rf(atts: Sequence[RfAttempt], clock: float | None = None) -> Outputs:
         arrivals.extend(("rf", a) for a in atts if a.ok)
         return rf_in(atts, clock)
 
@@ -198,7 +210,9 @@ def test_zero_wait_rf_seconds_late_final_track_equals_in_order_and_live_equals_o
         published.append(out)
         publish(out)
 
-    pipe.radar, pipe.rf, h.fusion.output.publish = radar, rf, record  # type: ignore[method-assign]
+    monkeypatch.setattr(pipe, "radar", radar)
+    monkeypatch.setattr(pipe, "rf", rf)
+    monkeypatch.setattr(h.fusion.output, "publish", record)
     h.feed(_order(frames, attempts, 4.0, 5, min_delay_s=2.0))
     h.spin_until(lambda: h.got() == len(frames) + len(attempts))
     h.fusion.flush()
@@ -216,7 +230,7 @@ def test_zero_wait_rf_seconds_late_final_track_equals_in_order_and_live_equals_o
 
 
 def test_malformed_points_are_dropped_and_counted_the_rest_fused(
-    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+    ctx: Context, flight_data: FlightData
 ) -> None:
     frames, _attempts, _ = flight_data
     h = Harness(ctx, idle_flush_s=0.0, stall_timeout_s=0.0)
@@ -241,7 +255,7 @@ def test_malformed_points_are_dropped_and_counted_the_rest_fused(
 
 
 def test_output_is_predicted_on_when_the_inputs_stall(
-    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+    ctx: Context, flight_data: FlightData
 ) -> None:
     frames, attempts, _ = flight_data
     h = Harness(ctx, idle_flush_s=0.2, stall_timeout_s=0.3)
@@ -251,7 +265,7 @@ def test_output_is_predicted_on_when_the_inputs_stall(
     h.spin_until(lambda: not fusion.pipeline.pending)
     last_t = fusion.pipeline.processed_t
     tracker = fusion.estimator
-    assert tracker is not None and tracker.best_track() is not None
+    assert isinstance(tracker, Tracker) and tracker.best_track() is not None
     # with the inputs silent the epochs beyond the last measurement are published as the
     # sensor time runs on (the node's clock plus the inputs' stamp lead; these stamps are from
     # 2025), never past the track's maximum coast
@@ -272,7 +286,7 @@ def test_output_is_predicted_on_when_the_inputs_stall(
 
 
 def test_live_fixed_lag_smoothing_equals_the_offline_one(
-    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+    ctx: Context, flight_data: FlightData
 ) -> None:
     frames, attempts, stream = flight_data
     site = load_site()
@@ -304,7 +318,7 @@ def test_live_fixed_lag_smoothing_equals_the_offline_one(
 
 
 def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
-    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]]
+    ctx: Context, flight_data: FlightData
 ) -> None:
     frames, attempts, stream = flight_data
     site = load_site()
@@ -335,7 +349,7 @@ def test_every_track_of_the_multi_uav_tracker_on_fusion_tracks(
 
 
 def test_output_delay_publishes_epochs_on_the_clock_and_the_schedule_reproduces_them(
-    ctx: Context, flight_data: tuple[list[Any], list[Any], list[Any]], tmp_path: Any
+    ctx: Context, flight_data: FlightData, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """output_delay_s 0: between inputs, and after the last one, the node publishes every
     fixed-rate epoch the sensor time has passed (its clock plus the inputs' stamp lead)
@@ -354,7 +368,7 @@ def test_output_delay_publishes_epochs_on_the_clock_and_the_schedule_reproduces_
         published.append(out)
         publish(out)
 
-    h.fusion.output.publish = record  # type: ignore[method-assign]
+    monkeypatch.setattr(h.fusion.output, "publish", record)
     order = _order(frames, attempts, 0.0, 0)
     h.feed(order)
     h.spin_until(lambda: h.got() == len(frames) + len(attempts))
@@ -366,7 +380,8 @@ def test_output_delay_publishes_epochs_on_the_clock_and_the_schedule_reproduces_
     rows = sched.read_text(encoding="utf-8").splitlines()
     clock_rows = [r for r in rows if r.startswith("clock,")]
     assert clock_rows, "the clock's moves are in the schedule"
-    h.fusion.input.arrivals.close()  # type: ignore[union-attr]
+    assert h.fusion.input.arrivals is not None
+    h.fusion.input.arrivals.close()
     est = make_estimator(profile, site, 10.0, live=True)
     flight = load_flight(data_path(DEFAULT_FLIGHT), site)
     items = [x for x in est.flight_input(flight) if x.t <= last_t]

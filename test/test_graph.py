@@ -132,7 +132,8 @@ def test_graph_zero_wait_with_late_rf_reproduces_offline_from_its_arrivals(
         final = [(s.t, s.status, repr(s.values)) for s in rw.steps]
         assert final == [(s.t, s.status, repr(s.values)) for s in offline.steps]
         graph.fusion.flush()
-        graph.fusion.input.arrivals.close()  # type: ignore[union-attr]
+        assert graph.fusion.input.arrivals is not None
+        graph.fusion.input.arrivals.close()
         est = make_estimator(profile, site, live=True)
         arrivals = read_schedule(arrivals_file, est.flight_input(flight))
         _outs, _, published = simulate(lambda: make_estimator(profile, site, live=True), arrivals)

@@ -106,14 +106,11 @@ def test_follower_replay_follows_the_simulated_clock(ctx: Context, flight_dir: P
     seen: list[tuple[float, float]] = []  # (stamp, follower's sim clock at arrival)
 
     col = Collector(ctx, {"truth/fix": NavSatFix})
-    col.create_subscription(
-        PointStamped,
-        "rf/fix",
-        lambda m: seen.append(
-            (cv.time_from_stamp(m.header.stamp), rf.get_clock().now().nanoseconds * 1e-9)
-        ),
-        stream_qos(1000),
-    )
+
+    def on_fix(m: PointStamped) -> None:
+        seen.append((cv.time_from_stamp(m.header.stamp), rf.get_clock().now().nanoseconds * 1e-9))
+
+    col.create_subscription(PointStamped, "rf/fix", on_fix, stream_qos(1000))
     ex = SingleThreadedExecutor(context=ctx)
     for n in (truth, rf, col):
         ex.add_node(n)
@@ -155,8 +152,8 @@ def test_min_subscribers_holds_the_first_message_until_every_reader_is_there(
     ex.add_node(second)
     spin_until(ex, lambda: len(got2) == len(first.got["rf/fix"]) == len(flight.rf))
     assert [m.header.stamp for m in got2] == [m.header.stamp for m in first.got["rf/fix"]]
-    for n in (rf, first, second):
-        n.destroy_node()
+    for node in (rf, first, second):
+        node.destroy_node()
 
 
 def test_delay_parameter_publishes_late_but_keeps_stamps(ctx: Context, flight_dir: Path) -> None:

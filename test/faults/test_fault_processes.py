@@ -177,7 +177,10 @@ def test_fusion_node_sigkill_and_restart_reinitialises_and_the_gap_is_reported(
             assert time.monotonic() < deadline, "timed out waiting for steps of the new node"
             n3 += segment(t, t + 1.0)
             t += 1.0
-            obs.spin_until(lambda n=n1 + n3: len(obs.odom) >= n, 60.0, "steps of the new node")
+            def fused(n: int = n1 + n3) -> bool:
+                return len(obs.odom) >= n
+
+            obs.spin_until(fused, 60.0, "steps of the new node")
             pause = time.monotonic() + 0.3
             while time.monotonic() < pause:
                 obs.ex.spin_once(timeout_sec=0.05)
@@ -221,7 +224,10 @@ def test_evaluator_restarted_writes_a_report_for_what_each_run_saw(
                 f"eval{run}", "evaluator_node", f"output_dir:={tmp_path / f'rep{run}'}",
                 "figures:=false", "log_period_s:=0.2",
             )
-            obs.spin_until(lambda old=old: bool(obs.readers("radar/raw") - old), 60.0, "reader")
+            def new_reader(old: set[bytes] = old) -> bool:
+                return bool(obs.readers("radar/raw") - old)
+
+            obs.spin_until(new_reader, 60.0, "reader")
             obs.spin_until(
                 lambda: pub.get_subscription_count() >= len(obs.readers("radar/raw")),
                 60.0, "matching",
@@ -229,9 +235,10 @@ def test_evaluator_restarted_writes_a_report_for_what_each_run_saw(
             for k in range(n):
                 t = T0 + 100.0 * run + k
                 pub.publish(radar_msg(t, *straight(t)))
-            obs.spin_until(
-                lambda n=n: eval_inputs(obs).get("used radar/raw") == str(n), 30.0, "evaluator"
-            )
+            def used(n: int = n) -> bool:
+                return eval_inputs(obs).get("used radar/raw") == str(n)
+
+            obs.spin_until(used, 30.0, "evaluator")
             counts.append(procs.stop(f"eval{run}", sig))
     finally:
         procs.stop_all()

@@ -42,7 +42,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 def examples(ci: int, fuzz: int | None = None) -> Callable[[F], F]:
     """Settings with ``ci`` examples in CI and ``fuzz`` (default UAV_FUZZ_EXAMPLES) in fuzz."""
     n = (FUZZ_EXAMPLES if fuzz is None else fuzz) if FUZZ else ci
-    return settings(max_examples=n)  # type: ignore[return-value]
+    return settings(max_examples=n)
 
 
 # --- damaged text -------------------------------------------------------------------------

@@ -111,7 +111,7 @@ def _apply_storage(f: Path, ops: list[tuple[str, int, int]]) -> None:
     f.write_bytes(bytes(data))
 
 
-meta_values = st.one_of(
+meta_values: st.SearchStrategy[object] = st.one_of(
     st.integers(-5, N + 5),
     st.sampled_from([10**30, -1, None, "x", [], {}, 1.5]),
 )

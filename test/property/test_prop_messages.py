@@ -15,11 +15,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
 from hypothesis import given
 from hypothesis import strategies as st
 from msgkit import FRAME, T0, cv, navsatfixes, odometries, points, poses
+from nav_msgs.msg import Odometry
 from propkit import FUZZ_NODE_EXAMPLES, examples
 from rclpy.context import Context
+from sensor_msgs.msg import NavSatFix
 
 from uav_fusion.core.estimators import FusionEstimator, load_profile
 from uav_fusion.core.records import RADAR, RF, Measurement
@@ -51,9 +54,9 @@ def _state_stays_finite(m: Measurement) -> None:
 
 @examples(ci=150)
 @given(msg=poses())
-def test_radar_pose_converts_or_is_dropped_by_reason(msg: object) -> None:
+def test_radar_pose_converts_or_is_dropped_by_reason(msg: PoseWithCovarianceStamped) -> None:
     try:
-        m = cv.msg_to_radar_measurement(msg, FRAME)  # type: ignore[arg-type]
+        m = cv.msg_to_radar_measurement(msg, FRAME)
     except cv.MessageError as exc:
         assert exc.reason in REASONS, exc
         return
@@ -65,14 +68,14 @@ def test_radar_pose_converts_or_is_dropped_by_reason(msg: object) -> None:
 
 @examples(ci=150)
 @given(msg=points())
-def test_rf_point_converts_or_is_dropped_by_reason(msg: object) -> None:
+def test_rf_point_converts_or_is_dropped_by_reason(msg: PointStamped) -> None:
     try:
-        m = cv.msg_to_rf_measurement(msg, FRAME)  # type: ignore[arg-type]
+        m = cv.msg_to_rf_measurement(msg, FRAME)
     except cv.MessageError as exc:
         assert exc.reason in REASONS, exc
         return
     if m is None:  # the failed-attempt encoding: counted as an attempt, never a position
-        assert cv.is_failed_rf(msg)  # type: ignore[arg-type]
+        assert cv.is_failed_rf(msg)
         return
     _check_stamp_value(m.t)
     assert m.source == RF and np.all(np.isfinite(m.z))
@@ -81,9 +84,9 @@ def test_rf_point_converts_or_is_dropped_by_reason(msg: object) -> None:
 
 @examples(ci=150)
 @given(msg=navsatfixes())
-def test_truth_navsatfix_converts_or_is_dropped_by_reason(msg: object) -> None:
+def test_truth_navsatfix_converts_or_is_dropped_by_reason(msg: NavSatFix) -> None:
     try:
-        fix = cv.navsatfix_to_truth(msg, SITE)  # type: ignore[arg-type]
+        fix = cv.navsatfix_to_truth(msg, SITE)
     except cv.MessageError as exc:
         assert exc.reason in TRUTH_REASONS, exc
         return
@@ -95,9 +98,9 @@ def test_truth_navsatfix_converts_or_is_dropped_by_reason(msg: object) -> None:
 
 @examples(ci=100)
 @given(msg=odometries())
-def test_odometry_converts_or_is_dropped_by_reason(msg: object) -> None:
+def test_odometry_converts_or_is_dropped_by_reason(msg: Odometry) -> None:
     try:
-        s = od.odometry_to_state(msg)  # type: ignore[arg-type]
+        s = od.odometry_to_state(msg)
     except cv.MessageError as exc:
         assert exc.reason in REASONS, exc
         return
@@ -105,12 +108,12 @@ def test_odometry_converts_or_is_dropped_by_reason(msg: object) -> None:
     assert np.all(np.isfinite(s.x)) and float(np.max(np.abs(s.x[:3]))) <= cv.MAX_ABS_ENU_M
 
 
-def _converts(msg: object) -> bool:
+def _converts(msg: PoseWithCovarianceStamped | PointStamped) -> bool:
     try:
         if hasattr(msg, "pose"):
-            cv.msg_to_radar_measurement(msg, FRAME)  # type: ignore[arg-type]
+            cv.msg_to_radar_measurement(msg, FRAME)
         else:
-            cv.msg_to_rf_measurement(msg, FRAME)  # type: ignore[arg-type]
+            cv.msg_to_rf_measurement(msg, FRAME)
     except cv.MessageError:
         return False
     return True
@@ -122,7 +125,7 @@ def _converts(msg: object) -> bool:
     rf=st.lists(points(), min_size=1, max_size=20),
 )
 def test_fusion_node_drops_and_counts_any_message(
-    ctx: Context, radar: list[object], rf: list[object]
+    ctx: Context, radar: list[PoseWithCovarianceStamped], rf: list[PointStamped]
 ) -> None:
     from faultkit import FusionHarness, accounting
 
