@@ -41,9 +41,12 @@ fuzz: $(DEV_STAMP)
 	ROS_DOMAIN_ID=$(DOMAIN) UAV_FUZZ=1 $(PY) -m pytest -v -p no:cacheprovider --timeout=0 \
 		--hypothesis-show-statistics test/property $(PYTEST_ARGS)
 
+# mypy: the package and the tests (pyproject.toml), then the two conftest files it leaves out
 lint: $(DEV_STAMP)
 	$(VENV)/bin/ruff check uav_fusion test scripts
 	$(VENV)/bin/mypy
+	$(VENV)/bin/mypy test/faults/conftest.py
+	$(VENV)/bin/mypy test/property/conftest.py
 	$(VENV)/bin/lint-imports
 
 bench: $(DEV_STAMP)
