@@ -252,7 +252,8 @@ _ASSOCIATION = (
     ),
     *_group("association.stationary", TRACKER,
         _s("speed_mps", "stationary_speed_mps", NUMBER, PHYSICAL, "an object whose mean speed "
-           "stays below this ...", unit="m/s", bounds=">= 0"),
+           "stays below this ... (the physical gates' ground rule also counts one whose "
+           "positions move slower: docs/estimator.md)", unit="m/s", bounds=">= 0"),
         _s("min_age_s", "stationary_min_age_s", NUMBER, DESIGN, "... once older than this ...",
            unit="s", bounds=">= 0"),
         _s("weight", "stationary_weight", NUMBER, DESIGN, "... loses this much",
