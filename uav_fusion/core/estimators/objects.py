@@ -73,51 +73,70 @@ if TYPE_CHECKING:
 RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
 
 
-class Drift:
-    """A straight line fitted to an object's horizontal positions against time (least
-    squares over all its reports, by running sums): the speed its body moves at, whatever
-    its reports' Doppler velocity says (a fan, a flag or a tree is seen by the radar through
-    its moving part, and its reported velocity is that part's), and how well the positions'
-    own scatter about the line pins that speed down."""
+#: Positions older than this fade from an object's drift fit (s; an exponential weight).
+DRIFT_TAU_S = 20.0
 
-    __slots__ = ("n", "se", "see", "sn", "snn", "st", "ste", "stn", "stt", "t0")
+
+class Drift:
+    """A straight line fitted to an object's horizontal positions against time (weighted
+    least squares by running sums, a position's weight fading as ``exp(-age / DRIFT_TAU_S)``):
+    the speed its body moves at, whatever its reports' Doppler velocity says (a fan, a flag or
+    a tree is seen by the radar through its moving part, and its reported velocity is that
+    part's), and how well the positions' own scatter about the line pins that speed down.
+    The fading keeps the fit about the object's recent half minute or so: a reflector
+    1.5 km out, whose reports scatter by 35 m across the line of sight, is known to stand
+    still after about 40 s of reports, and a radar track id that passes from a reflector onto
+    an object moving at 8 m/s shows the motion within 20 s, where a fit over the whole
+    history would need minutes (``test/test_gates.py``)."""
+
+    __slots__ = ("k", "se", "see", "sn", "snn", "st", "ste", "stn", "stt", "t0", "w")
 
     def __init__(self, t0: float) -> None:
-        self.t0 = t0
-        self.n = 0
+        self.t0 = t0  # the time the sums are taken about: the last position's
+        self.k = 0  # positions added
+        self.w = 0.0  # their summed weight
         self.st = self.stt = 0.0
         self.se = self.ste = self.see = 0.0
         self.sn = self.stn = self.snn = 0.0
 
     def add(self, t: float, e: float, n: float) -> None:
-        x = t - self.t0
-        self.n += 1
-        self.st += x
-        self.stt += x * x
+        d = t - self.t0
+        if d != 0.0:
+            # fade the sums by the time passed and take them about t (x -> x - d)
+            a = math.exp(-d / DRIFT_TAU_S) if d > 0.0 else 1.0
+            w, st, se, sn = a * self.w, a * self.st, a * self.se, a * self.sn
+            self.stt = a * self.stt - 2.0 * d * st + d * d * w
+            self.ste = a * self.ste - d * se
+            self.stn = a * self.stn - d * sn
+            self.st = st - d * w
+            self.w, self.se, self.sn = w, se, sn
+            self.see *= a
+            self.snn *= a
+            self.t0 = t
+        self.k += 1
+        self.w += 1.0
         self.se += e
-        self.ste += x * e
         self.see += e * e
         self.sn += n
-        self.stn += x * n
         self.snn += n * n
 
     def speed(self) -> tuple[float, float] | None:
         """The fitted horizontal speed and its standard error (per axis, m/s), or None with
         fewer than 3 positions or no time between them."""
-        k = self.n
-        if k < 3:
+        w = self.w
+        if self.k < 3 or not w > 2.0:
             return None
-        sxx = self.stt - self.st * self.st / k
+        sxx = self.stt - self.st * self.st / w
         if not sxx > 1e-9:
             return None
         v2 = 0.0
         var = 0.0
         for sy, sty, syy in ((self.se, self.ste, self.see), (self.sn, self.stn, self.snn)):
-            sxy = sty - self.st * sy / k
+            sxy = sty - self.st * sy / w
             b = sxy / sxx
-            ssr = syy - sy * sy / k - b * sxy  # the residuals' sum of squares
+            ssr = syy - sy * sy / w - b * sxy  # the residuals' weighted sum of squares
             v2 += b * b
-            var += (ssr if ssr > 0.0 else 0.0) / (k - 2) / sxx
+            var += (ssr if ssr > 0.0 else 0.0) / (w - 2.0) / sxx
         return math.sqrt(v2), math.sqrt(0.5 * var)
 
     def still(self, speed_mps: float) -> bool:
