@@ -5,6 +5,7 @@ also runs with the rule switched off to show that it is the rule that decides.""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -61,19 +62,21 @@ def _lost_uav(site: Site, seed: int = 3, rf_after: bool = False) -> Scene:
     return sc
 
 
+def _add_object(sc: Scene, start: float, report: Callable[[float], RadarTrack]) -> None:
+    """Add to every radar frame from ``start`` on the report ``report(t)`` of another object."""
+    sc.frames = [
+        RadarFrame(f.t, (*f.tracks, report(f.t))) if f.t >= start else f for f in sc.frames
+    ]
+
+
 def _with_ground_object(
     sc: Scene, at: np.ndarray, start: float, rf_from: float | None = None
 ) -> list[RadarFrame | RfAttempt]:
     """Add a stationary object on the ground at ``at`` (east, north), classed UAV (0.95)
     from its first report at ``start``; RF fixes at it every 4 s from ``rf_from``."""
-    frames = []
-    for f in sc.frames:
-        if f.t >= start:
-            g = sc.report(f.t, GROUND_ID, np.array([at[0], at[1], 1.0]), 0.95, np.zeros(3),
-                          sd=3.0, rcs_dbsm=-12.0)  # fmt: skip
-            f = RadarFrame(f.t, (*f.tracks, g))
-        frames.append(f)
-    sc.frames = frames
+    ground = np.array([at[0], at[1], 1.0])
+    _add_object(sc, start, lambda t: sc.report(t, GROUND_ID, ground, 0.95, np.zeros(3), sd=3.0,
+                                               rcs_dbsm=-12.0))  # fmt: skip
     if rf_from is not None:
         k = 10_000
         for t in np.arange(rf_from, sc.frames[-1].t, 4.0):
@@ -130,17 +133,15 @@ def test_a_ground_object_seen_through_its_moving_part_is_still_a_ground_object(
     sc = _lost_uav(site)
     at = _far_point(sc, 1500.0)
     seen = LOST_AT + 40.0
-    frames = []
-    for f in sc.frames:
-        if f.t >= seen:
-            a = float(sc.rng.uniform(0.0, 2.0 * math.pi))
-            vel = float(sc.rng.uniform(4.0, 8.0)) * np.array([math.cos(a), math.sin(a), 0.0])
-            prob = 0.3 if f.t < seen + 20.0 else 0.95
-            g = sc.report(f.t, GROUND_ID, np.array([at[0], at[1], 1.0]), prob, vel, sd=3.0,
-                          rcs_dbsm=-12.0)  # fmt: skip
-            f = RadarFrame(f.t, (*f.tracks, g))
-        frames.append(f)
-    sc.frames = frames
+
+    def fan(t: float) -> RadarTrack:
+        a = float(sc.rng.uniform(0.0, 2.0 * math.pi))
+        vel = float(sc.rng.uniform(4.0, 8.0)) * np.array([math.cos(a), math.sin(a), 0.0])
+        prob = 0.3 if t < seen + 20.0 else 0.95
+        return sc.report(t, GROUND_ID, np.array([at[0], at[1], 1.0]), prob, vel, sd=3.0,
+                         rcs_dbsm=-12.0)  # fmt: skip
+
+    _add_object(sc, seen, fan)
     tr = Tracker(_profile(), site)
     steps = run_tracker(tr, sc.stream())
     obj = tr.objects.objects[GROUND_ID]
@@ -221,15 +222,12 @@ def test_an_object_the_uav_cannot_have_reached_starts_the_track_only_once_it_cou
     # an airborne object 1.5 km out appears 25 s after the loss: the UAV could be 30 m/s x
     # (25 s + its last update before the loss) + 200 m away, about 950 m
     at = _far_point(sc, 1500.0)
-    frames = []
-    for f in sc.frames:
-        if f.t >= LOST_AT + 25.0:
-            p = np.array([at[0] + 5.0 * (f.t - LOST_AT), at[1], 60.0])  # east at 5 m/s
-            g = sc.report(f.t, GROUND_ID, p, 0.95, np.array([5.0, 0.0, 0.0]), sd=3.0,
-                          rcs_dbsm=-12.0)  # fmt: skip
-            f = RadarFrame(f.t, (*f.tracks, g))
-        frames.append(f)
-    sc.frames = frames
+    def flyer(t: float) -> RadarTrack:  # east at 5 m/s
+        p = np.array([at[0] + 5.0 * (t - LOST_AT), at[1], 60.0])
+        return sc.report(t, GROUND_ID, p, 0.95, np.array([5.0, 0.0, 0.0]), sd=3.0,
+                         rcs_dbsm=-12.0)  # fmt: skip
+
+    _add_object(sc, LOST_AT + 25.0, flyer)
     tr = Tracker(_profile(), site)
     steps = run_tracker(tr, sc.stream())
     assert tr.counters["init_refused_unreachable"] > 0
