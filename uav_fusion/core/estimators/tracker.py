@@ -44,7 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from uav_fusion.core.estimators.adaptive import observe_rf_fix, rf_status
-from uav_fusion.core.estimators.consider import consider_for
+from uav_fusion.core.estimators.consider import published_cov
 from uav_fusion.core.estimators.follow import RadarFollower
 from uav_fusion.core.estimators.gates import PhysicalGates, horizontal_nis, rf_move
 from uav_fusion.core.estimators.grid import Outputs, StepGrid, step_outputs
@@ -152,9 +152,9 @@ class Tracker:
         self._packed: _Packed = (None, None, b"", (), (0.0, 0.0, 0.0))
         # the estimator interface: fixed-rate output, live fixed-lag smoothing
         self._args = (grid_hz, t0, t1, smooth)
-        #: the published covariance (the radar's elevation error as a consider term)
-        self.consider = consider_for(profile, site)
-        cons = self.consider.cov if self.consider is not None else None
+        # the fixed-rate output's published covariance: the radar's elevation error as a
+        # consider term
+        cons = published_cov(profile, site)
         self.grid = (
             StepGrid(profile, grid_hz, t0, t1, consider=cons) if grid_hz is not None else None
         )
