@@ -202,6 +202,28 @@ def test_the_drift_fit_at_its_edges() -> None:
     assert d.speed() is None and not d.still(1.5)
 
 
+def test_a_coasting_track_does_not_pass_onto_a_ground_object_inside_its_gate(
+    site: Site, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # 3 s after the UAV vanishes, a stationary object classed UAV appears on the ground right
+    # below where the coasting track is: inside its gate and reachable, so only the ground
+    # rule stands between the track and the object
+    sc = _lost_uav(site)
+    t0 = LOST_AT + 3.0
+    _with_ground_object(sc, sc.uav(t0)[:2], start=t0)
+    stream = sc.stream()
+    tr = Tracker(_profile(), site)
+    steps = run_tracker(tr, stream)
+    assert tr.gates.airborne and tr.counters["rejected_ground"] > 0
+    assert not [s for s in steps if s.updated and s.track_id == GROUND_ID]
+    assert tr.counters.get("reinit_max_coast") == 1  # the track coasted out instead
+    # the rule decides: without it the coasting track takes the object's first report
+    monkeypatch.setattr(PhysicalGates, "refuse_ground", lambda self, obj, t: False)
+    steps = run_tracker(Tracker(_profile(), site), stream)
+    taken = [s for s in steps if s.updated and s.track_id == GROUND_ID]
+    assert taken and taken[0].t < t0 + 1.0
+
+
 def test_radar_and_rf_agreeing_corroborate_a_ground_object(site: Site) -> None:
     sc = _lost_uav(site)
     at = _far_point(sc, 1500.0)

@@ -9,7 +9,9 @@ score):
 - confirmed track: a report is *eligible* when its object's score is at least ``follow_min``;
   of the eligible reports inside the NIS gate (and, for another radar object than the one
   followed, reachable from the track's last update at ``track.max_speed_mps`` plus
-  ``association.takeover.reach_margin_m``) the one with the smallest ``NIS - 2 score``
+  ``association.takeover.reach_margin_m``, and not a ground object without corroboration:
+  :meth:`~uav_fusion.core.estimators.gates.PhysicalGates.refuse_ground`) the one with the
+  smallest ``NIS - 2 score``
   (global nearest neighbour with the score as prior log-odds) updates the track with
   ``R / w`` (``w`` the robust weight); the others are ``not_selected``. When no eligible
   report is inside the gate, the followed object, or one strong enough to start a track,
@@ -123,8 +125,13 @@ class RadarFollower:
                     z = zs[i]
                     nis = nis3(z[0], z[1], z[2], r) if nis3 is not None else f.nis(z, r)
                     inside = nis <= g
-                if inside and reach > 0 and trk.track_id != tr.followed:
-                    inside = self._reachable(t, z[0], z[1], reach)
+                if inside and trk.track_id != tr.followed:
+                    if reach > 0 and not self._reachable(t, z[0], z[1], reach):
+                        inside = False
+                    elif tr.gates.refuse_ground(obj, t):
+                        # a ground object no second source confirms (gates.py)
+                        inside = False
+                        tr._count("rejected_ground")
                 if mark is not None:
                     mark(obj, nis <= fused_nis, t)
                 scored.append((i, trk, obj, s, z, r, nis, inside))

@@ -14,7 +14,9 @@ says so:
   confirmed: several RF fixes agreeing with each other.
 * **Ground objects.** After take-off (a confirmed state once stood clearly above the ground)
   an object near the ground and stationary is never the UAV without corroboration, however
-  reachable: a parked vehicle, a mast or a reflector sits there for the whole flight. The
+  reachable: a parked vehicle, a mast or a reflector sits there for the whole flight. This
+  holds for a start and for a confirmed track passing from the object it follows onto
+  another one inside its gate (after a coast the gate is wide). The
   object table's own terms decide: "near the ground" is a mean height below
   ``ground_alt_m`` plus two of its reports' mean vertical sigmas; "stationary" is a mean
   Doppler speed below ``stationary_speed_mps`` or, once the object is
@@ -121,11 +123,17 @@ class PhysicalGates:
         """Why ``obj`` (reported at ``e``, ``n``) may not start the track at ``t``, or None."""
         if self.anchor is None or self.corroborated(obj, t):
             return None
-        if self.airborne and self.grounded(obj):
+        if self.refuse_ground(obj, t):
             return "ground"
         if not self.reachable(t, e, n):
             return "unreachable"
         return None
+
+    def refuse_ground(self, obj: RadarObject, t: float) -> bool:
+        """Whether ``obj`` may not become the UAV at ``t`` as a ground object: after take-off,
+        near the ground and stationary, and no RF fix credited to it within ``rf_tau_s``.
+        Applies to a start and to a confirmed track passing onto another object."""
+        return self.airborne and self.grounded(obj) and not self.corroborated(obj, t)
 
     # --- RF-only moves ------------------------------------------------------------------
     def agrees(self, a: HeldFix, b: HeldFix) -> bool:
