@@ -894,10 +894,9 @@ def test_invalid_reports_never_reach_the_state(site: Site) -> None:
     assert all(np.all(np.isfinite(s.x)) for s in steps if s.counted)
 
 
-def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
-    """A report repeating its radar track's velocity and RCS is the radar's own prediction
-    (a coast): the fused track does not take it; the same reports with a fresh RCS are
-    fused."""
+def _coasting_scene(site: Site) -> Scene:
+    """The loop 400 m out, its onboard radar track coasting from 30 to 34 s: each report then
+    repeats the previous one's velocity and RCS."""
     sc = Scene(site, seed=7)
     sc.build(60.0)
     frames: list[RadarFrame] = []
@@ -922,6 +921,14 @@ def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
             f = RadarFrame(f.t, (coast,))
         frames.append(f)
     sc.frames = frames
+    return sc
+
+
+def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
+    """A report repeating its radar track's velocity and RCS is the radar's own prediction
+    (a coast): the fused track does not take it; the same reports with a fresh RCS are
+    fused."""
+    sc = _coasting_scene(site)
     prof = load_profile("tracker")
     steps = run_tracker(Tracker(prof, site), sc.stream())
     coasts = [s for s in steps if s.reason == "coast"]
@@ -939,6 +946,27 @@ def test_coasted_reports_are_not_fused_as_measurements(site: Site) -> None:
     assert not any(s.reason == "coast" for s in steps_fresh)
     used = [s for s in steps_fresh if 30.0 <= s.t < 34.0 and s.updated and s.source == "radar"]
     assert len(used) == 16
+
+
+@pytest.mark.parametrize(
+    ("gate_m", "far_m", "why"), [(300.0, 600.0, "coast"), (200.0, 300.0, "range_gate")]
+)
+def test_a_coast_between_the_gates_is_a_coast_and_beyond_the_far_gate_out_of_range(
+    site: Site, gate_m: float, far_m: float, why: str
+) -> None:
+    # the loop runs 400 m out: between the gates (its reports horizontal-only candidates) or
+    # beyond both; the onboard coast's reports are counted by the reason that discards them
+    sc = _coasting_scene(site)
+    prof = load_profile("tracker").with_changes(range_gate_m=gate_m, far_gate_m=far_m)
+    tr = Tracker(prof, site)
+    steps = run_tracker(tr, sc.stream())
+    during = [s for s in steps if s.source == "radar" and 30.0 <= s.t < 34.0]
+    assert len(during) == 16 and all(s.status == "discarded" and s.reason == why for s in during)
+    other = "range_gate" if why == "coast" else "coast"
+    assert tr.counters.get(f"rejected_{why}", 0) >= 16 and not tr.counters.get(f"rejected_{other}")
+    if why == "coast":  # the reports either side of the coast update the track in 2D
+        used = [s for s in steps if s.status == "updated" and s.source == "radar"]
+        assert len(used) > 100 and all(len(s.z) == 2 for s in used)
 
 
 # --- the runner -----------------------------------------------------------------------------

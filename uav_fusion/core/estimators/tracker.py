@@ -398,17 +398,16 @@ class Tracker:
         for i, trk, obj, p3, r, d2 in reports:
             zs[i] = p3
             rs[i] = r
-            if d2 > gate2:
-                if d2 <= far2 and not obj.coasting:
-                    # inside the far gate: a horizontal-only candidate (R's horizontal
-                    # block; the elevation is too poor out there)
-                    far.add(i)
-                    rs[i] = (r[0], r[1], r[3])
-                    cands.append((i, trk, obj, obj.score(cfg)))
-                    continue
+            if d2 > gate2 and d2 > far2:
                 out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, p3, trk.track_id)
             elif obj.coasting:
                 out[i] = self._step(t, RADAR, DISCARDED, "coast", None, p3, trk.track_id)
+            elif d2 > gate2:
+                # inside the far gate: a horizontal-only candidate (R's horizontal block; the
+                # elevation is too poor out there)
+                far.add(i)
+                rs[i] = (r[0], r[1], r[3])
+                cands.append((i, trk, obj, obj.score(cfg)))
             else:
                 cands.append((i, trk, obj, obj.score(cfg)))
         if cands:
