@@ -217,6 +217,12 @@ def test_a_coasting_track_does_not_pass_onto_a_ground_object_inside_its_gate(
     assert tr.gates.airborne and tr.counters["rejected_ground"] > 0
     assert not [s for s in steps if s.updated and s.track_id == GROUND_ID]
     assert tr.counters.get("reinit_max_coast") == 1  # the track coasted out instead
+    # an RF fix credited to the object corroborates it: the track passes onto it then
+    sc = _lost_uav(site)
+    _with_ground_object(sc, sc.uav(t0)[:2], start=t0, rf_from=t0 + 2.0)
+    steps = run_tracker(Tracker(_profile(), site), sc.stream())
+    taken = [s for s in steps if s.updated and s.track_id == GROUND_ID]
+    assert taken and t0 + 2.0 < taken[0].t < t0 + 3.0
     # the rule decides: without it the coasting track takes the object's first report
     monkeypatch.setattr(PhysicalGates, "refuse_ground", lambda self, obj, t: False)
     steps = run_tracker(Tracker(_profile(), site), stream)
