@@ -11,11 +11,13 @@ import pytest
 import yaml
 
 from uav_fusion.cli import main
+from uav_fusion.core.bench.cache import core_source_digest
 from uav_fusion.core.bench.sweep import (
     combo_label,
     load_spec,
     run_sweep_task,
     sweep_tasks,
+    task_key,
 )
 from uav_fusion.core.bench.sweep_figure import write_figure
 from uav_fusion.core.errors import ConfigError
@@ -135,6 +137,28 @@ def test_task_keys_follow_the_inputs(tmp_path: Path) -> None:
     spec2 = load_spec(_setup(tmp_path, parameters={"motion.q": [1.0, 5.0]}))
     c = sweep_tasks(spec2, tmp_path / "cache", SITE_FILE, site)
     assert a[0].key == c[0].key and a[1].key != c[1].key  # only the changed value differs
+
+
+def test_task_keys_change_with_the_core_source(tmp_path: Path) -> None:
+    # a result computed by other code is not reused: the key holds the core's source digest
+    root = tmp_path / "core"
+    (root / "estimators").mkdir(parents=True)
+    (root / "estimators" / "tracker.py").write_text("GATE = 1\n")
+    (root / "notes.txt").write_text("not source")
+    d1 = core_source_digest(root)
+    (root / "notes.txt").write_text("changed, still not source")
+    assert core_source_digest(root) == d1
+    (root / "estimators" / "tracker.py").write_text("GATE = 2\n")
+    d2 = core_source_digest(root)
+    assert d2 != d1
+    (root / "estimators" / "tracker.py").write_text("GATE = 1\n")
+    assert core_source_digest(root) == d1
+    spec = load_spec(_setup(tmp_path))
+    site = load_site(SITE_FILE)
+    task = sweep_tasks(spec, tmp_path / "cache", SITE_FILE, site)[0]
+    keys = {task_key(task.flight, task.profile_path, task.params, spec.definition, d)
+            for d in (d1, d2, core_source_digest())}  # fmt: skip
+    assert len(keys) == 3 and task.key in keys
 
 
 def test_a_failing_task_is_reported_and_a_rerun_computes_only_what_is_missing(

@@ -41,6 +41,7 @@ FloatArray = npt.NDArray[np.float64]
 LABELS_FILE = "bench_labels.json"
 CACHE_FORMAT = 1  # bump when the cached folder's layout changes
 _TWIN_SOURCE = Path(radar_model.__file__).resolve().parent
+_CORE_SOURCE = _TWIN_SOURCE.parent
 
 
 @dataclass(frozen=True)
@@ -69,6 +70,18 @@ def twin_source_digest() -> str:
     h = hashlib.sha256()
     for p in sorted(_TWIN_SOURCE.glob("*.py")):
         _digest(h, p.name, p.read_bytes())
+    return h.hexdigest()
+
+
+def core_source_digest(root: Path | None = None) -> str:
+    """Hash of the source files of the package's core (every ``.py`` under ``root``, by
+    default ``uav_fusion/core``: the estimators, the scoring, the twin): a change in the code
+    that computes a benchmark result changes the key that stores it
+    (:func:`uav_fusion.core.bench.sweep.task_key`)."""
+    base = _CORE_SOURCE if root is None else root
+    h = hashlib.sha256()
+    for p in sorted(base.rglob("*.py")):
+        _digest(h, p.relative_to(base).as_posix(), p.read_bytes())
     return h.hexdigest()
 
 

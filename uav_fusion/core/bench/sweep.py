@@ -32,9 +32,10 @@ benchmark's metrics (:func:`uav_fusion.core.bench.single.score_task`; a multi-UA
 flights run the multi-UAV tracker and are scored as a set of targets,
 :func:`uav_fusion.core.bench.multi.multi_score_task`, each flight's figures on their own).
 Its result is keyed by a hash of its inputs (the flight's cache key, the bytes of the profile
-file and of the files it extends, the parameter values and the scoring settings), so a re-run
-computes only what is missing. A task that raises is reported as a failure row with its
-inputs and does not stop the others.
+file and of the files it extends, the parameter values, the scoring settings and the source of
+the package's core, which computes it), so a re-run computes only what is missing and a
+changed estimator computes everything again. A task that raises is reported as a failure row
+with its inputs and does not stop the others.
 """
 
 from __future__ import annotations
@@ -49,7 +50,12 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from uav_fusion.core.bench.cache import CachedFlight, cached_flights, generate_flight
+from uav_fusion.core.bench.cache import (
+    CachedFlight,
+    cached_flights,
+    core_source_digest,
+    generate_flight,
+)
 from uav_fusion.core.bench.definition import (
     SPLITS,
     BenchDefinition,
@@ -302,10 +308,16 @@ class SweepTask:
 
 
 def task_key(
-    flight: CachedFlight, profile_file: Path, params: dict[str, Any], definition: BenchDefinition
+    flight: CachedFlight,
+    profile_file: Path,
+    params: dict[str, Any],
+    definition: BenchDefinition,
+    code: str,
 ) -> str:
-    """Hash of a task's inputs: what decides its result."""
+    """Hash of a task's inputs: what decides its result (``code``: the digest of the core's
+    source, :func:`~uav_fusion.core.bench.cache.core_source_digest`)."""
     h = hashlib.sha256()
+    h.update(b"\0code\0" + code.encode())
     h.update(flight.folder.name.encode())  # plan, seed and the flight's cache key
     for f in profile_files(profile_file):  # the file and those it extends
         h.update(b"\0profile\0" + f.read_bytes())
@@ -327,13 +339,14 @@ def sweep_tasks(spec: SweepSpec, cache_dir: Path, site_file: Path, site: Site) -
         and f.flight.seed in spec.seeds
         and (spec.families is None or f.flight.family in spec.families)
     ]
+    code = core_source_digest()
     out = []
     for f in flights:
         for path in spec.profiles:
             for combo in spec.combinations():
                 out.append(
                     SweepTask(
-                        key=task_key(f, path, combo, spec.definition),
+                        key=task_key(f, path, combo, spec.definition, code),
                         flight=f,
                         definition=spec.definition,
                         profile_path=path,
