@@ -216,6 +216,12 @@ def test_a_coasting_track_does_not_pass_onto_a_ground_object_inside_its_gate(
     steps = run_tracker(tr, stream)
     assert tr.gates.airborne and tr.counters["rejected_ground"] > 0
     assert not [s for s in steps if s.updated and s.track_id == GROUND_ID]
+    # refused while the track coasts, not only at the restart after it (a report the frame's
+    # rejection of the track is made of is a coasted step; the others are discarded as such)
+    coasting = [s for s in steps if s.track_id == GROUND_ID and s.t < LOST_AT + 15.0]
+    dropped = [s for s in coasting if s.status == "discarded"]
+    assert dropped and all(s.reason == "ground" for s in dropped)
+    assert all(s.status in ("discarded", "coasted") for s in coasting)
     assert tr.counters.get("reinit_max_coast") == 1  # the track coasted out instead
     # an RF fix credited to the object corroborates it: the track passes onto it then
     sc = _lost_uav(site)

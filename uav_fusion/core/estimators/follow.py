@@ -10,7 +10,8 @@ score):
   of the eligible reports inside the NIS gate (and, for another radar object than the one
   followed, reachable from the track's last update at ``track.max_speed_mps`` plus
   ``association.takeover.reach_margin_m``, and not a ground object without corroboration:
-  :meth:`~uav_fusion.core.estimators.gates.PhysicalGates.refuse_ground`) the one with the
+  :meth:`~uav_fusion.core.estimators.gates.PhysicalGates.refuse_ground`; a report refused
+  so is discarded as ``unreachable`` or ``ground``) the one with the
   smallest ``NIS - 2 score``
   (global nearest neighbour with the score as prior log-odds) updates the track with
   ``R / w`` (``w`` the robust weight); the others are ``not_selected``. When no eligible
@@ -114,6 +115,8 @@ class RadarFollower:
             fused_nis = cfg.fused_nis
             reach = cfg.reach_margin_m
             g2 = tr._g2
+            # reports inside the gate that the track may not pass onto, and why
+            refused: dict[int, str] = {}
             for i, trk, obj, s in cands:
                 r = rs[i]
                 z: tuple[float, ...]
@@ -128,10 +131,11 @@ class RadarFollower:
                 if inside and trk.track_id != tr.followed:
                     if reach > 0 and not self._reachable(t, z[0], z[1], reach):
                         inside = False
+                        refused[i] = "unreachable"
                     elif tr.gates.refuse_ground(obj, t):
                         # a ground object no second source confirms (gates.py)
                         inside = False
-                        tr._count("rejected_ground")
+                        refused[i] = "ground"
                 if mark is not None:
                     mark(obj, nis <= fused_nis, t)
                 scored.append((i, trk, obj, s, z, r, nis, inside))
@@ -168,7 +172,7 @@ class RadarFollower:
                 for e in scored:
                     if e is not best:
                         why = "not_selected" if e[3] >= cfg.follow_min else "score"
-                        res.append((e[0], self._discard(t, e, why)))
+                        res.append((e[0], self._discard(t, e, refused.get(e[0], why))))
                 return res
             # nothing usable inside the gate: a rejection of the track only when the object
             # it follows, or one strong enough to start a track, disagrees with it
@@ -192,11 +196,11 @@ class RadarFollower:
                     if e is best:
                         continue
                     why = "nis" if e[3] >= cfg.follow_min else "score"
-                    res.append((e[0], self._discard(t, e, why)))
+                    res.append((e[0], self._discard(t, e, refused.get(e[0], why))))
                 return res
             for e in scored:
                 why = "nis" if e[3] >= cfg.follow_min else "score"
-                res.append((e[0], self._discard(t, e, why)))
+                res.append((e[0], self._discard(t, e, refused.get(e[0], why))))
             return res
         # no confirmed track (none, or a tentative RF track): a strong object starts one
         return self.initiate(t, cands, far, zs)
