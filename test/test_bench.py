@@ -164,9 +164,19 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert int(row["epochs"]) == r.samples.epochs > 0
     cov = 100 * r.samples.covered / r.samples.epochs
     assert float(row["coverage_pct"]) == pytest.approx(cov, abs=1e-4)
+    assert r.registration is None  # the paper profile does not register the radar
     # warm cache: nothing generated again
     assert main(argv) == 0
     assert "2 flights cached, 0 to generate" in capsys.readouterr().out
+    # the tracker registers the radar; a plain twin flight's manifest holds the true mount
+    # (the twin's default, 0.5 deg), so the bench scores it as it does a world's
+    rt = score_task(ScoreTask(cf, load_profile("tracker"), load_site(), d.grid_hz, d.settings))
+    assert rt.registration is not None and rt.registration.true_deg == 0.5
+    assert main([*argv[:4], "tracker", *argv[6:]]) == 0
+    text = capsys.readouterr().out
+    line = next(x for x in text.splitlines() if "tracker: azimuth within 0.1 deg" in x)
+    assert "of the true mount, or within the flight's bound, on " in line
+    assert " of 2 flights (" in line
     # --readme: the results file beside the README, and the README's table rendered from it
     readme = tmp_path / "README.md"
     begin, end = "<!-- bench:tiny-test:begin -->", "<!-- bench:tiny-test:end -->"

@@ -17,8 +17,9 @@ import yaml
 from uav_fusion.cli import main
 from uav_fusion.core.bench.cache import cached_flights, generate_flight
 from uav_fusion.core.bench.definition import load_definition
+from uav_fusion.core.bench.single import true_mount_az
 from uav_fusion.core.bench.sweep import spec_from_dict, sweep_tasks
-from uav_fusion.core.errors import ConfigError
+from uav_fusion.core.errors import ConfigError, DataError
 from uav_fusion.core.scoring.calibration import angle_residuals
 from uav_fusion.core.scoring.fixed_rate import longest_run
 from uav_fusion.core.site import Site, load_site
@@ -150,7 +151,12 @@ def test_a_world_is_applied_and_recorded_with_the_flight(site: Site, tmp_path: P
     assert world["radar_mount"]["fov_az_deg"] == twin.site.radar.fov_az_deg
     manifest = json.loads((tmp_path / "w" / MANIFEST).read_text())
     assert manifest["world"] == {"family": "turned", "file": WORLD_FILE}
-    assert "world" not in json.loads((tmp_path / "p" / MANIFEST).read_text())
+    plain_manifest = json.loads((tmp_path / "p" / MANIFEST).read_text())
+    assert "world" not in plain_manifest
+    # both manifests record the mount the reports were given; the bench reads it as the truth
+    assert manifest["radar_mount"] == {"az_bias_deg": 3.0, "el_bias_deg": el}
+    assert plain_manifest["radar_mount"] == {"az_bias_deg": 0.5, "el_bias_deg": 0.3}
+    assert true_mount_az(tmp_path / "w") == 3.0 and true_mount_az(tmp_path / "p") == 0.5
     # the reports are turned by the drawn misalignment
     res = angle_residuals(twin_to_flight(twin), site.radar.enu)
     base = angle_residuals(twin_to_flight(plain), site.radar.enu)
@@ -344,3 +350,23 @@ def test_longest_run_counts_consecutive_epochs() -> None:
     flags = np.array([True, False, True, True, True, False, True, True])
     assert longest_run(flags) == 3
     assert longest_run(np.ones(5, dtype=bool)) == 5
+
+
+def test_the_true_mount_of_a_folder_without_one_is_unknown_and_a_bad_one_is_named(
+    tmp_path: Path,
+) -> None:
+    """A recorded flight (no manifest) and an older twin manifest (no mount) have no true
+    mount, so registration is not scored; a manifest that is not JSON, or whose mount is not
+    a number, stops with the file named."""
+    assert true_mount_az(tmp_path) is None
+    man = tmp_path / MANIFEST
+    man.write_text(json.dumps({"generator": "uav_fusion digital twin", "seed": 1}))
+    assert true_mount_az(tmp_path) is None
+    man.write_text(json.dumps({"radar_mount": {"az_bias_deg": 0.25, "el_bias_deg": 0.1}}))
+    assert true_mount_az(tmp_path) == 0.25
+    man.write_text(json.dumps({"radar_mount": {"az_bias_deg": "left"}}))
+    with pytest.raises(DataError, match=r"twin_manifest\.json: radar_mount\.az_bias_deg"):
+        true_mount_az(tmp_path)
+    man.write_text("{not json")
+    with pytest.raises(DataError, match=r"twin_manifest\.json: unreadable twin manifest"):
+        true_mount_az(tmp_path)

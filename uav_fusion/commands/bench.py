@@ -190,13 +190,13 @@ def run(args: argparse.Namespace) -> int:
             f"longest: the longest run of epochs more than {settings.episode_error_m:g} m off):"
         )
         print(text_families(by_family, settings.episode_error_m))
-        reg_lines = registration_lines(results)
-        if reg_lines:
-            print()
-            print("radar registration at the end of each flight (the bound: the estimate's "
-                  "sigma widened for noisier, correlated residuals):")
-            for line in reg_lines:
-                print(f"  {line}")
+    reg_lines = registration_lines(results)
+    if reg_lines:
+        print()
+        print("radar registration at the end of each flight (the bound: the estimate's "
+              "sigma widened for noisier, correlated residuals):")
+        for line in reg_lines:
+            print(f"  {line}")
     print()
     for line in provenance_lines(prov):
         print(f"  {line}")

@@ -10,7 +10,6 @@ time ``t``".
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -33,7 +32,7 @@ from uav_fusion.core.records import Flight
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin import radar_model
 from uav_fusion.core.twin.generate import TwinFlight
-from uav_fusion.core.twin.writers import MANIFEST
+from uav_fusion.core.twin.writers import MANIFEST, read_manifest
 
 FloatArray = npt.NDArray[np.float64]
 # per radar track id: its report times (the flight's radar timeline) and, at each, the kind
@@ -126,13 +125,9 @@ def kind_at(kinds: KindsByTrack, track_id: int | None, t: float) -> tuple[str, i
 def vehicle_links(folder: Path) -> tuple[dict[int, str], dict[str, str]]:
     """From a twin flight's manifest: the twin object id of each UAV -> its vehicle name, and
     each emitting UAV's emitter key (``emitter_key`` of its centre frequency) -> its name."""
-    path = folder / MANIFEST
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DataError(path, None, "twin manifest not found") from None
-    except ValueError as exc:
-        raise DataError(path, None, f"unreadable twin manifest: {exc}") from None
+    doc = read_manifest(folder)
+    if doc is None:
+        raise DataError(folder / MANIFEST, None, "twin manifest not found")
     objects: dict[int, str] = {}
     emitters: dict[str, str] = {}
     for i, v in enumerate(doc.get("vehicles", []) or []):

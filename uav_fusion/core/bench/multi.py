@@ -31,7 +31,6 @@ share of the flights' time, and the tracker's run time.
 from __future__ import annotations
 
 import csv
-import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -63,7 +62,7 @@ from uav_fusion.core.scoring.gospa import (
 from uav_fusion.core.scoring.metrics import interpolate_truth
 from uav_fusion.core.scoring.outcomes import FlightSamples
 from uav_fusion.core.site import Site
-from uav_fusion.core.twin.writers import MANIFEST
+from uav_fusion.core.twin.writers import read_manifest
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -124,13 +123,9 @@ class MultiFlightResult:
 
 def silent_vehicles(folder: Path) -> set[str]:
     """The UAVs of a twin flight without a control link (from its manifest)."""
-    path = folder / MANIFEST
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
+    doc = read_manifest(folder)
+    if doc is None:
         return set()
-    except ValueError as exc:
-        raise DataError(path, None, f"unreadable twin manifest: {exc}") from None
     out: set[str] = set()
     for v in doc.get("vehicles", []) or []:
         if isinstance(v, dict) and v.get("center_frequency_hz", 0) is None:

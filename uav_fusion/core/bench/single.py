@@ -26,6 +26,7 @@ from uav_fusion.core.scoring.fixed_rate import (
 )
 from uav_fusion.core.site import Site
 from uav_fusion.core.twin.worlds import read_world
+from uav_fusion.core.twin.writers import MANIFEST, read_manifest
 
 
 @dataclass(frozen=True)
@@ -129,9 +130,20 @@ def registration(
 
 
 def true_mount_az(folder: Path) -> float | None:
-    """The radar's true azimuth misalignment of a flight generated in a world (its
-    ``world.yaml``), else None."""
+    """The radar's true azimuth misalignment of a twin flight: from its ``world.yaml`` when it
+    was generated in a world, else from its manifest's ``radar_mount``; None for a flight
+    that records neither (a recorded flight, or a twin flight written before the manifest
+    held the mount)."""
     doc = read_world(folder)
-    if doc is None:
+    if doc is not None:
+        return float(doc["radar_mount"]["az_bias_deg"])
+    man = read_manifest(folder)
+    mount = None if man is None else man.get("radar_mount")
+    if mount is None:
         return None
-    return float(doc["radar_mount"]["az_bias_deg"])
+    try:
+        return float(mount["az_bias_deg"])
+    except (KeyError, TypeError, ValueError):
+        raise DataError(
+            folder / MANIFEST, None, f"radar_mount.az_bias_deg: a number expected, got {mount!r}"
+        ) from None

@@ -18,6 +18,7 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from uav_fusion.core.errors import DataError
 from uav_fusion.core.twin.worlds import WORLD_FILE, world_doc, write_world
 
 if TYPE_CHECKING:
@@ -230,6 +231,12 @@ def write_manifest(twin: TwinFlight, path: Path, names: dict[str, str]) -> None:
             "h": r.h,
             "boresight_az_deg": r.boresight_az_deg,
         },
+        # the misalignment the twin gave the radar's reports (the site file's calibration,
+        # if any, is what a deployment believes; this is what is true)
+        "radar_mount": {
+            "az_bias_deg": twin.config.radar.az_bias_deg,
+            "el_bias_deg": twin.config.radar.el_bias_deg,
+        },
         "rf_sensors": list(twin.site.rf_sensors),
         "vehicles": [
             {
@@ -252,6 +259,21 @@ def write_manifest(twin: TwinFlight, path: Path, names: dict[str, str]) -> None:
 
 
 MANIFEST = "twin_manifest.json"
+
+
+def read_manifest(folder: str | Path) -> dict[str, Any] | None:
+    """A flight folder's ``twin_manifest.json`` (None when the folder has none: not a twin
+    flight). An unreadable one is a :class:`~uav_fusion.core.errors.DataError` naming it."""
+    path = Path(folder) / MANIFEST
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as exc:
+        raise DataError(path, None, f"unreadable twin manifest: {exc}") from None
+    if not isinstance(doc, dict):
+        raise DataError(path, None, "unreadable twin manifest: not a JSON object")
+    return doc
 
 
 def write_twin(twin: TwinFlight, out_dir: str | Path) -> dict[str, Path]:
