@@ -13,7 +13,7 @@ from test_tracker import Scene
 
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.gates import FAR_SIGMAS, PhysicalGates
-from uav_fusion.core.estimators.objects import Drift
+from uav_fusion.core.estimators.objects import Drift, RadarObject
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.steps import TrackerStep
 from uav_fusion.core.estimators.tracker import Tracker
@@ -286,6 +286,35 @@ def test_the_reach_gate_at_its_edge() -> None:
     assert gates.reachable(10.0, 0.0, 499.9) and not gates.reachable(10.0, 0.0, 500.1)
     assert gates.reachable(10.0, 300.0, 399.9) and not gates.reachable(10.0, 300.0, 400.1)
     assert PhysicalGates(ScoreConfig(reach_margin_m=0.0), 30.0).reachable(10.0, 1e6, 0.0)
+
+
+def test_the_ground_rule_at_its_edges() -> None:
+    """Each condition of ``refuse_ground`` at its boundary: the track is airborne once a
+    confirmed state stood more than ``ground_alt_m`` plus two of its own vertical sigmas up;
+    an object is near the ground below ``ground_alt_m`` plus two of its reports' mean
+    vertical sigmas; an RF fix corroborates it for ``rf_tau_s`` after it was credited."""
+    cfg = ScoreConfig(ground_alt_m=4.0, stationary_speed_mps=1.5, rf_tau_s=20.0)
+    gates = PhysicalGates(cfg, max_speed_mps=30.0)
+    obj = RadarObject(GROUND_ID, 0.0)
+    obj.last_t = 1.0  # young, its mean Doppler speed 0: stationary
+    obj.up, obj.sd_up = 9.9, 3.0  # below 4 + 2 x 3 = 10 m: near the ground
+    assert gates.grounded(obj)
+    # not airborne yet: 9.9 m up with a vertical sigma of 3 m is not clearly off the ground
+    gates.confirmed_state(0.0, [0.0, 0.0, 9.9, 0.0, 0.0, 0.0], 9.0)
+    assert not gates.airborne and not gates.refuse_ground(obj, 1.0)
+    gates.confirmed_state(0.5, [0.0, 0.0, 10.1, 0.0, 0.0, 0.0], 9.0)
+    assert gates.airborne and gates.refuse_ground(obj, 1.0)
+    obj.up = 10.1  # above 4 + 2 x 3 m: not near the ground, so not refused
+    assert not gates.grounded(obj) and not gates.refuse_ground(obj, 1.0)
+    obj.up = 9.9
+    obj.speed = 1.6  # moving (and too young for its positions to say otherwise)
+    assert not gates.grounded(obj)
+    obj.speed = 1.4
+    # an RF fix credited at 5 s corroborates it until 25 s, not after
+    obj.rf_support, obj.rf_t = 1.0, 5.0
+    assert not gates.refuse_ground(obj, 25.0) and gates.refuse_ground(obj, 25.1)
+    assert gates.refuse_start(obj, 25.0, 0.0, 0.0) is None
+    assert gates.refuse_start(obj, 25.1, 0.0, 0.0) == "ground"
 
 
 def test_the_takeover_reach_gate_at_its_edge(site: Site) -> None:

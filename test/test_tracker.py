@@ -553,6 +553,40 @@ def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site
     assert taken and taken[0].t < t_bird + 1.0
 
 
+def test_the_lost_track_rule_at_its_edge(site: Site) -> None:
+    """``lost_sigma_m`` at its boundary, in the scene above: set just above the coasting
+    track's horizontal sigma when the object first reports, the object's report counts as
+    agreement and the track follows it; just below, it does not."""
+    gap, bird_id, t_bird = (100.0, 116.0), 555, 110.0
+
+    def seen(t: float) -> bool:
+        return not gap[0] <= t < gap[1]
+
+    def bird(sc: Scene, t: float, k: int) -> RadarTrack | None:
+        if t < t_bird:
+            return None
+        p = sc.uav(t_bird) + np.array([150.0, 0.0, 0.0]) + np.array([0.0, 8.0, 0.0]) * (t - t_bird)
+        return sc.report(t, bird_id, p, 0.3, np.array([0.0, 8.0, 0.0]), rcs_dbsm=-24.0)
+
+    sc = Scene(site, seed=6)
+    sc.build(200.0, uav_visible=seen, rf_ok=seen, fragment_s=116.0, decoy=bird)
+    items = sc.stream()
+    first = min(f.t for f in sc.frames if any(r.track_id == bird_id for r in f.tracks))
+    base = _rule_alone()
+    probe = Tracker(base, site)
+    run_tracker(probe, [i for i in items if i.t < first])
+    _, P = probe.predict_to(first)
+    sigma = math.sqrt(max(P[0, 0], P[1, 1]))
+    assert 40.0 < sigma < 400.0  # a coast of 10 s: well beyond the UAV's neighbourhood
+
+    def taken(cap: float) -> bool:
+        prof = dataclasses.replace(base, score=dataclasses.replace(base.score, lost_sigma_m=cap))
+        steps = run_tracker(Tracker(prof, site), items)
+        return any(s.updated and s.track_id == bird_id for s in steps)
+
+    assert taken(1.01 * sigma) and not taken(0.99 * sigma)
+
+
 def test_an_object_out_of_reach_of_a_coasting_track_is_not_followed(site: Site) -> None:
     # both sensors lose the UAV for 19.5 s; 17 s in, an object classed 0.75 appears 800 m
     # beyond where the track last was: inside the coasting track's grown gate, but farther
