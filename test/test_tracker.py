@@ -513,29 +513,32 @@ def _rule_alone() -> Profile:
     return dataclasses.replace(load_profile("tracker"), hold_after_s=None)
 
 
-def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site: Site) -> None:
-    # the UAV is lost to both sensors for 16 s; 10 s in, a bird-like object (classed 0.3,
-    # small, smooth) appears 150 m from where the track predicts it, well inside the grown
-    # gate; the UAV comes back under a new radar id at 116 s
-    gap = (100.0, 116.0)
-    bird_id = 555
-    t_bird = 110.0
+# the UAV is lost to both sensors for 16 s; 10 s in, a bird-like object (classed 0.3, small,
+# smooth) appears 150 m from where the track predicts it, well inside the grown gate; the UAV
+# comes back under a new radar id at 116 s
+COAST_GAP = (100.0, 116.0)
+BIRD_ID = 555
+T_BIRD = 110.0
 
+
+def _coast_with_bird(site: Site) -> Scene:
     def seen(t: float) -> bool:
-        return not gap[0] <= t < gap[1]
+        return not COAST_GAP[0] <= t < COAST_GAP[1]
 
     def bird(sc: Scene, t: float, k: int) -> RadarTrack | None:
-        if t < t_bird:
+        if t < T_BIRD:
             return None
-        p = sc.uav(t_bird) + np.array([150.0, 0.0, 0.0]) + np.array([0.0, 8.0, 0.0]) * (t - t_bird)
-        return sc.report(t, bird_id, p, 0.3, np.array([0.0, 8.0, 0.0]), rcs_dbsm=-24.0)
+        p = sc.uav(T_BIRD) + np.array([150.0, 0.0, 0.0]) + np.array([0.0, 8.0, 0.0]) * (t - T_BIRD)
+        return sc.report(t, BIRD_ID, p, 0.3, np.array([0.0, 8.0, 0.0]), rcs_dbsm=-24.0)
 
-    def stream() -> Scene:
-        sc = Scene(site, seed=6)
-        sc.build(200.0, uav_visible=seen, rf_ok=seen, fragment_s=116.0, decoy=bird)
-        return sc
+    sc = Scene(site, seed=6)
+    sc.build(200.0, uav_visible=seen, rf_ok=seen, fragment_s=116.0, decoy=bird)
+    return sc
 
-    sc = stream()
+
+def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site: Site) -> None:
+    gap, bird_id, t_bird = COAST_GAP, BIRD_ID, T_BIRD
+    sc = _coast_with_bird(site)
     base = _rule_alone()
     tracker = Tracker(base, site)
     steps = run_tracker(tracker, sc.stream())
@@ -548,7 +551,7 @@ def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site
     # without the rule the object's first report inside the wide gate counts as agreement
     # with the track, which is enough to follow it (the track jumps 150 m and stays there)
     off = dataclasses.replace(base, score=dataclasses.replace(base.score, lost_sigma_m=0.0))
-    steps0 = run_tracker(Tracker(off, site), stream().stream())
+    steps0 = run_tracker(Tracker(off, site), _coast_with_bird(site).stream())
     taken = [s for s in steps0 if s.updated and s.track_id == bird_id]
     assert taken and taken[0].t < t_bird + 1.0
 
@@ -557,21 +560,9 @@ def test_the_lost_track_rule_at_its_edge(site: Site) -> None:
     """``lost_sigma_m`` at its boundary, in the scene above: set just above the coasting
     track's horizontal sigma when the object first reports, the object's report counts as
     agreement and the track follows it; just below, it does not."""
-    gap, bird_id, t_bird = (100.0, 116.0), 555, 110.0
-
-    def seen(t: float) -> bool:
-        return not gap[0] <= t < gap[1]
-
-    def bird(sc: Scene, t: float, k: int) -> RadarTrack | None:
-        if t < t_bird:
-            return None
-        p = sc.uav(t_bird) + np.array([150.0, 0.0, 0.0]) + np.array([0.0, 8.0, 0.0]) * (t - t_bird)
-        return sc.report(t, bird_id, p, 0.3, np.array([0.0, 8.0, 0.0]), rcs_dbsm=-24.0)
-
-    sc = Scene(site, seed=6)
-    sc.build(200.0, uav_visible=seen, rf_ok=seen, fragment_s=116.0, decoy=bird)
+    sc = _coast_with_bird(site)
     items = sc.stream()
-    first = min(f.t for f in sc.frames if any(r.track_id == bird_id for r in f.tracks))
+    first = min(f.t for f in sc.frames if any(r.track_id == BIRD_ID for r in f.tracks))
     base = _rule_alone()
     probe = Tracker(base, site)
     run_tracker(probe, [i for i in items if i.t < first])
@@ -582,7 +573,7 @@ def test_the_lost_track_rule_at_its_edge(site: Site) -> None:
     def taken(cap: float) -> bool:
         prof = dataclasses.replace(base, score=dataclasses.replace(base.score, lost_sigma_m=cap))
         steps = run_tracker(Tracker(prof, site), items)
-        return any(s.updated and s.track_id == bird_id for s in steps)
+        return any(s.updated and s.track_id == BIRD_ID for s in steps)
 
     assert taken(1.01 * sigma) and not taken(0.99 * sigma)
 
