@@ -15,8 +15,9 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from uav_fusion.core.bench.cache import CachedFlight, cached_flights
 from uav_fusion.core.bench.definition import SPLITS, BenchDefinition, load_definition
@@ -53,6 +54,9 @@ from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.profiles.model import Profile, load_profile, profile_path
 from uav_fusion.core.site import Site, load_site
 from uav_fusion.resources import DEFAULT_SITE, config_path
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 HELP = "accuracy benchmark: profiles x generated flights (tune/test split), fixed-rate scores"
 
@@ -108,8 +112,6 @@ def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from uav_fusion.batch import Engine
-
     wall0 = time.perf_counter()
     definition = load_definition(args.definition)
     profiles = [load_profile(p) for p in args.profiles]
@@ -143,39 +145,18 @@ def run(args: argparse.Namespace) -> int:
     )
     if definition.multi:
         return _run_multi(args, definition, profiles, site, flights, missing, out, wall0)
-    engine = Engine(workers=args.workers, scheduler=args.scheduler, processes=not args.threads)
-    with engine:
-        engine_desc = engine.description
-        print(f"  engine: {engine_desc}")
-        t0 = time.perf_counter()
-        engine.map(
-            generate_task,
-            [GenerateTask(f, definition, site) for f in missing],
-            label="generate",
-            describe=lambda t: t.flight.flight_id,
-        )
-        t_gen = time.perf_counter() - t0
-        tasks = [
-            ScoreTask(f, p, site, definition.grid_hz, definition.settings)
-            for p in profiles
-            for f in flights
-        ]
-        t0 = time.perf_counter()
-        results = engine.map(
-            score_task,
-            tasks,
-            label="run+score",
-            describe=lambda t: f"{t.profile.name} on {t.flight.flight_id}",
-        )
-        t_run = time.perf_counter() - t0
+    tasks = [
+        ScoreTask(f, p, site, definition.grid_hz, definition.settings)
+        for p in profiles
+        for f in flights
+    ]
+    results, runs = _generate_and_run(
+        args, definition, site, missing, score_task, tasks,
+        lambda t: f"{t.profile.name} on {t.flight.flight_id}",
+    )  # fmt: skip
     settings = definition.settings
     scores = pooled(results, settings)
-    prov = provenance(
-        args.split,
-        len(flights),
-        definition.source,
-        {"profiles": ", ".join(f"{p.name} ({p.source})" for p in profiles)},
-    )
+    prov = _provenance(args, definition, flights, profiles)
     print()
     print(
         f"pooled over {len(flights)} {args.split} flights, {definition.grid_hz:g} Hz grid, "
@@ -214,11 +195,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"per-flight figures: {csv_path}")
     if not args.no_figure:
         print(f"figure: {write_figure(results, settings, out / FIGURE_FILE)}")
-    wall = time.perf_counter() - wall0
-    timing = (
-        f"{wall:.1f} s (generation {t_gen:.1f} s for {len(missing)} flights, "
-        f"runs {t_run:.1f} s for {len(tasks)} profile x flight tasks; {engine_desc})"
-    )
+    timing = f"{time.perf_counter() - wall0:.1f} s ({runs})"
     prov["wall_time"] = timing
     json_path = write_summary_json(scores, prov, out / JSON_FILE, by_family)
     print(f"table (Markdown): {table_path}; summary: {json_path}")
@@ -277,6 +254,53 @@ def _publish(
     print(f"results: {path}; {readme}: the bench:{name} table replaced")
 
 
+def _generate_and_run(
+    args: argparse.Namespace,
+    definition: BenchDefinition,
+    site: Site,
+    missing: list[CachedFlight],
+    fn: Callable[[T], R],
+    tasks: list[T],
+    describe: Callable[[T], str],
+) -> tuple[list[R], str]:
+    """Generate the flights the cache lacks, then run ``fn`` over ``tasks`` on the engine
+    the arguments ask for; the results and what the two took, for the wall-time line."""
+    from uav_fusion.batch import Engine  # dask: imported when a benchmark runs
+
+    engine = Engine(workers=args.workers, scheduler=args.scheduler, processes=not args.threads)
+    with engine:
+        print(f"  engine: {engine.description}")
+        t0 = time.perf_counter()
+        engine.map(
+            generate_task,
+            [GenerateTask(f, definition, site) for f in missing],
+            label="generate",
+            describe=lambda t: t.flight.flight_id,
+        )
+        t_gen = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        results = engine.map(fn, tasks, label="run+score", describe=describe)
+        t_run = time.perf_counter() - t0
+    return results, (
+        f"generation {t_gen:.1f} s for {len(missing)} flights, runs {t_run:.1f} s for "
+        f"{len(tasks)} profile x flight tasks; {engine.description}"
+    )
+
+
+def _provenance(
+    args: argparse.Namespace,
+    definition: BenchDefinition,
+    flights: list[CachedFlight],
+    profiles: list[Profile],
+) -> dict[str, Any]:
+    return provenance(
+        args.split,
+        len(flights),
+        definition.source,
+        {"profiles": ", ".join(f"{p.name} ({p.source})" for p in profiles)},
+    )
+
+
 def _run_multi(
     args: argparse.Namespace,
     definition: BenchDefinition,
@@ -288,7 +312,6 @@ def _run_multi(
     wall0: float,
 ) -> int:
     """The multi-UAV part: the multi-UAV tracker per profile and flight, scored as a set."""
-    from uav_fusion.batch import Engine
     from uav_fusion.core.bench.multi import (
         CSV_FILE as MULTI_CSV,
     )
@@ -319,44 +342,22 @@ def _run_multi(
                 f"{p.source}: the multi-UAV benchmark needs a tracker profile (estimator: "
                 f"tracker or multi); {p.name!r} is not one"
             )
-    engine = Engine(workers=args.workers, scheduler=args.scheduler, processes=not args.threads)
     settings = definition.settings
-    with engine:
-        engine_desc = engine.description
-        print(f"  engine: {engine_desc}")
-        t0 = time.perf_counter()
-        engine.map(
-            generate_task,
-            [GenerateTask(f, definition, site) for f in missing],
-            label="generate",
-            describe=lambda t: t.flight.flight_id,
+    # the profiles, then the radar's own tracks passed through (radar_baseline.py)
+    tasks = [
+        MultiScoreTask(
+            f, p, site, definition.grid_hz, settings.airborne_min_m,
+            settings.observable_window_s, definition.excuse_grounded, baseline=base,
         )
-        t_gen = time.perf_counter() - t0
-        # the profiles, then the radar's own tracks passed through (radar_baseline.py)
-        tasks = [
-            MultiScoreTask(
-                f, p, site, definition.grid_hz, settings.airborne_min_m,
-                settings.observable_window_s, definition.excuse_grounded, baseline=base,
-            )
-            for p, base in [*((p, False) for p in profiles), (profiles[0], True)]
-            for f in flights
-        ]  # fmt: skip
-        t0 = time.perf_counter()
-        results = engine.map(
-            multi_score_task,
-            tasks,
-            label="run+score",
-            describe=lambda t: f"{RADAR_BASELINE if t.baseline else t.profile.name} on "
-            f"{t.flight.flight_id}",
-        )
-        t_run = time.perf_counter() - t0
+        for p, base in [*((p, False) for p in profiles), (profiles[0], True)]
+        for f in flights
+    ]  # fmt: skip
+    results, runs = _generate_and_run(
+        args, definition, site, missing, multi_score_task, tasks,
+        lambda t: f"{RADAR_BASELINE if t.baseline else t.profile.name} on {t.flight.flight_id}",
+    )  # fmt: skip
     scores = pool_multi(results)
-    prov = provenance(
-        args.split,
-        len(flights),
-        definition.source,
-        {"profiles": ", ".join(f"{p.name} ({p.source})" for p in profiles)},
-    )
+    prov = _provenance(args, definition, flights, profiles)
     print()
     print(
         f"pooled over {len(flights)} {args.split} flights, {definition.grid_hz:g} Hz grid, "
@@ -384,11 +385,7 @@ def _run_multi(
     print(f"per-flight, per-UAV figures: {csv_path}")
     if not args.no_figure:
         print(f"figure: {write_multi_figure(results, out / MULTI_FIGURE)}")
-    wall = time.perf_counter() - wall0
-    timing = (
-        f"{wall:.1f} s (generation {t_gen:.1f} s for {len(missing)} flights, "
-        f"runs {t_run:.1f} s for {len(tasks)} profile x flight tasks; {engine_desc})"
-    )
+    timing = f"{time.perf_counter() - wall0:.1f} s ({runs})"
     prov["wall_time"] = timing
     doc = {"provenance": prov, "profiles": {k: v.as_dict() for k, v in scores.items()}}
     json_path = out / JSON_FILE
