@@ -149,6 +149,11 @@ _MEASUREMENT = (
         _k("floor_m", "radar_floor_m", NUMBER, FITTED, "polar model: standard deviation added "
            "on each axis (successive reports' errors are correlated)", unit="m",
            bounds=">= 0", fit=TUNED),
+        _k("low_el_gain", "radar_low_el_gain", NUMBER, FITTED, "ground multipath: the "
+           "elevation sigma is multiplied by 1 + low_el_gain exp(-el / low_el_deg)",
+           bounds=">= 0", fit=TUNED),
+        _k("low_el_deg", "radar_low_el_deg", NUMBER, PHYSICAL, "the elevation scale of the "
+           "ground-multipath term", unit="deg", bounds="> 0"),
     ),
     _k("measurement.rf.R", "r_rf", MATRIX, FITTED, "RF covariance (east, north) of the paper's "
        "estimator and the fixed model", unit="m^2", size=2,
@@ -381,10 +386,6 @@ _EARLY_BIRTH = (
     "a strong object moving at association.stationary.speed_mps or more starts a track from "
     "the age association.class.tau_s"
 )
-_LOW_EL = (
-    "gone: the elevation sigma is the radar's specification, raised online where the "
-    "innovations show more (measurement.adaptive)"
-)
 #: Keys that have left the schema, with what a profile that still sets one should do.
 RETIRED: dict[str, str] = {
     "update.vz_hold_after_s": "it is update.hold_after_s",
@@ -416,8 +417,6 @@ RETIRED: dict[str, str] = {
     "recent as multi.output_coast_s",
     "update.dof": "the Student-t update has 4 degrees of freedom, a constant",
     "update.huber_k": "gone with the huber update (update.robust is none or student_t)",
-    "measurement.radar.low_el_gain": _LOW_EL,
-    "measurement.radar.low_el_deg": _LOW_EL,
     "multi.early_birth_age_s": _EARLY_BIRTH,
     "multi.early_birth_speed_mps": _EARLY_BIRTH,
 }
