@@ -67,6 +67,7 @@ MOVED = {
     "multi.early_birth_speed_mps": "association.stationary.speed_mps (1.5 m/s, 3 m/s before)",
     "robust_dof": "a constant of the Student-t update (4 in all)",
     "robust_huber_k": "gone with the huber update (no profile used it)",
+    "robust": "always Student-t in the trackers (student_t in both tracker profiles)",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}

@@ -58,7 +58,10 @@ def _imm(**changes: Any) -> dict[str, Any]:
     [
         (lambda d: d["measurement"]["radar"].update(model="lidar"), "measurement.radar.model"),
         (lambda d: d["measurement"]["rf"].update(model="magic"), "measurement.rf.model"),
-        (lambda d: d["update"].update(robust="cauchy"), "update.robust"),
+        (
+            lambda d: d["update"].update(robust="none"),
+            r"'update\.robust' is no longer a key: the trackers' update is always Student-t",
+        ),
         (lambda d: d["association"].update(mode="track_score"), "association.mode is no longer"),
         (lambda d: d.update(estimator="nearest"), "estimator must be one of paper, tracker, multi"),
         (lambda d: d["motion"].update(model="ct"), "motion.model"),

@@ -177,10 +177,14 @@ def test_student_t_weight_hand_cases() -> None:
 def test_the_robust_update_is_student_t_with_four_dof_or_none(tmp_path: Path) -> None:
     assert robust_from_profile(load_profile("tracker")) == StudentTWeight(4.0)
     assert isinstance(robust_from_profile(load_profile("paper")), NoRobust)
+    # every tracker profile gets it, whatever it extends (it is not a setting)
+    as_tracker = load_profile("paper").with_changes(estimator="tracker")
+    assert robust_from_profile(as_tracker) == StudentTWeight(4.0)
     # a profile that still sets a retired key is told where it went, with its file
     for key, text in (
         ("dof", "the Student-t update has 4 degrees of freedom"),
         ("huber_k", "gone with the huber update"),
+        ("robust", "always Student-t with 4 degrees of freedom"),
     ):
         p = tmp_path / f"{key}.yaml"
         p.write_text(f"name: p\nextends: tracker\nupdate:\n  {key}: 6.0\n", encoding="utf-8")

@@ -390,8 +390,10 @@ def rf_model_from_profile(profile: Profile) -> RfRModel:
 
 
 def robust_from_profile(profile: Profile) -> RobustWeight:
-    """The robust update weight (``update.robust``)."""
-    if profile.robust == "student_t":
+    """The robust update weight: Student-t with ``STUDENT_T_DOF`` degrees of freedom for the
+    trackers (an outlier inside the gate counts less, not only one outside it); none for the
+    paper's estimator."""
+    if profile.uses_tracker:
         return StudentTWeight(STUDENT_T_DOF)
     return NoRobust()
 

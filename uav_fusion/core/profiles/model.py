@@ -94,7 +94,6 @@ class Profile:
     rf_cep_scale: float = 1.0
     rf_floor_m: float = 5.0
     rf_max_cep_m: float | None = None  # RF fixes with a larger CEP are discarded
-    robust: str = "none"  # none | student_t
     # no radar update for this long: pseudo-measurements hold what the radar no longer
     # measures (RF fixes: climb rate 0; inside the 3D range gate: radial speed 0, a hover in
     # the Doppler notch); None: never

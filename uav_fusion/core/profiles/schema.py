@@ -85,7 +85,7 @@ SECTIONS: dict[str, str] = {
     "gating": "which radar reports may update the track",
     "sources": "which sensors are used at all",
     "track": "track start, confirmation and deletion",
-    "update": "the Kalman update's robust weight and pseudo-measurements",
+    "update": "the Kalman update's pseudo-measurements",
     "association": "the UAV score of every radar object, by cue (core/estimators/objects.py)",
     "association.class": "the radar classifier's output, read over time",
     "association.stationary": "clutter: an object that stands still",
@@ -228,9 +228,6 @@ _TRACK = _group(
 )
 _UPDATE = _group(
     "update", TRACKER,
-    _k("robust", "robust", CHOICE, DESIGN, "the update uses R / w: none (w = 1) or student_t "
-       "(w = (4 + m) / (4 + NIS), at most 1: a Student-t noise of 4 degrees of freedom)",
-       choices=("none", "student_t")),
     _k("hold_after_s", "hold_after_s", NUMBER, FITTED, "without a radar update for this long, "
        "pseudo-measurements hold what the radar no longer measures: each RF fix first applies "
        "climb rate = 0 (2D fixes cannot see it), and, for the single-UAV tracker inside the 3D "
@@ -416,7 +413,9 @@ RETIRED: dict[str, str] = {
     "multi.radar_output_s": "inside radar cover, a track's last radar update must be as "
     "recent as multi.output_coast_s",
     "update.dof": "the Student-t update has 4 degrees of freedom, a constant",
-    "update.huber_k": "gone with the huber update (update.robust is none or student_t)",
+    "update.huber_k": "gone with the huber update (the trackers' update is Student-t)",
+    "update.robust": "the trackers' update is always Student-t with 4 degrees of freedom "
+    "(R / w, w = (4 + m) / (4 + NIS) at most 1); the paper's estimator has none",
     "multi.early_birth_age_s": _EARLY_BIRTH,
     "multi.early_birth_speed_mps": _EARLY_BIRTH,
 }
