@@ -152,8 +152,9 @@ _MEASUREMENT = (
         _k("low_el_gain", "radar_low_el_gain", NUMBER, FITTED, "ground multipath: the "
            "elevation sigma is multiplied by 1 + low_el_gain exp(-el / low_el_deg)",
            bounds=">= 0", fit=TUNED),
-        _k("low_el_deg", "radar_low_el_deg", NUMBER, PHYSICAL, "the elevation scale of the "
-           "ground-multipath term", unit="deg", bounds="> 0"),
+        _k("low_el_deg", "radar_low_el_deg", NUMBER, FITTED, "the elevation scale of the "
+           "ground-multipath term (4 deg: the twin's own multipath scale, not a property of "
+           "the radar)", unit="deg", bounds="> 0", fit=TUNED),
     ),
     _k("measurement.rf.R", "r_rf", MATRIX, FITTED, "RF covariance (east, north) of the paper's "
        "estimator and the fixed model", unit="m^2", size=2,
