@@ -68,6 +68,8 @@ MOVED = {
     "robust_dof": "a constant of the Student-t update (4 in all)",
     "robust_huber_k": "gone with the huber update (no profile used it)",
     "robust": "always Student-t in the trackers (student_t in both tracker profiles)",
+    "radar_low_el_gain": "gone: the adaptive elevation sigma (2 in the tracker, 0 in paper)",
+    "radar_low_el_deg": "gone with it",
 }
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}
@@ -87,6 +89,8 @@ RETUNED: dict[str, dict[str, Any]] = {
         # fix without a CEP counts as max_cep_m
         "r_radar": None,
         "r_rf": None,
+        # two vertical sigmas once the elevation sigma is the specification (no multipath term)
+        "score.below_ground_sigmas": 2.0,
     },
 }
 # Defaults changed since, seen by the profiles that do not set them (the paper's estimator

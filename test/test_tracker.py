@@ -90,12 +90,12 @@ def _imm(**changes: Any) -> dict[str, Any]:
             r"'association\.object\.skip_radar_coasts' is no longer a key: a radar coast",
         ),
         (
-            lambda d: d["measurement"]["radar"].update(low_el_gain=-1.0),
-            r"measurement\.radar\.low_el_gain",
+            lambda d: d["measurement"]["radar"].update(low_el_gain=2.0),
+            r"'measurement\.radar\.low_el_gain' is no longer a key: .*specification",
         ),
         (
-            lambda d: d["measurement"]["radar"].update(low_el_deg=0.0),
-            r"measurement\.radar\.low_el_deg must be a number > 0",
+            lambda d: d["measurement"]["radar"].update(sigma_el_deg=-2.0),
+            r"measurement\.radar\.sigma_el_deg must be a number >= 0",
         ),
         (
             lambda d: d["gating"].update(range_gate_m=1500.0, far_gate_m=1200.0),

@@ -71,25 +71,6 @@ def test_polar_r_is_a_rotation_of_the_polar_covariance() -> None:
     np.testing.assert_allclose(R @ u_r, 1.5**2 * u_r, atol=1e-9)
 
 
-# --- RF R from CEP --------------------------------------------------------------------------
-def test_polar_r_low_elevation_inflation_hand_case() -> None:
-    # due north, 1000 m out: elevation 0 -> factor 1 + 2 = 3; at 10 deg: 1 + 2 exp(-2.5)
-    plain = PolarRadarR((0.0, 0.0, 0.0), 2.0, RAD(1.0), RAD(0.5))
-    mp = PolarRadarR((0.0, 0.0, 0.0), 2.0, RAD(1.0), RAD(0.5), low_el_gain=2.0, low_el_deg=4.0)
-    r0, r1 = plain.r_at(0.0, 1000.0, 0.0), mp.r_at(0.0, 1000.0, 0.0)
-    assert r1[5] == pytest.approx((1000.0 * RAD(0.5) * 3.0) ** 2, rel=1e-12)
-    assert r1[0] == pytest.approx(r0[0]) and r1[3] == pytest.approx(r0[3])  # az, range alone
-    el = math.radians(10.0)
-    e, n, u = 0.0, 1000.0 * math.cos(el), 1000.0 * math.sin(el)
-    f = 1.0 + 2.0 * math.exp(-10.0 / 4.0)
-    # the elevation axis at 10 deg: (-sin el along north, cos el up)
-    r = mp.r_at(e, n, u)
-    var_el = (1000.0 * RAD(0.5) * f) ** 2
-    var_r = 2.0**2
-    assert r[5] == pytest.approx(var_r * math.sin(el) ** 2 + var_el * math.cos(el) ** 2)
-    assert r[3] == pytest.approx(var_r * math.cos(el) ** 2 + var_el * math.sin(el) ** 2)
-
-
 # --- radar misalignment ---------------------------------------------------------------------
 def _polar_report(radar: tuple[float, float, float], az: float, el: float, r: float) -> RadarTrack:
     e0, n0, u0 = radar
@@ -137,6 +118,7 @@ def test_radar_alignment_of_a_frame_and_without_a_bias() -> None:
         assert math.degrees(math.atan2(trk.u, math.hypot(trk.e, trk.n))) == pytest.approx(el)
 
 
+# --- RF R from CEP --------------------------------------------------------------------------
 def test_cep_r_hand_cases() -> None:
     m = CepRfR(scale=2.0, floor_m=5.0, fallback=(9.0, 0.0, 9.0))
     s = 2.0 * 20.0 / CEP_PER_SIGMA  # CEP 20 m

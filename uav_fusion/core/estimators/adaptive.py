@@ -15,7 +15,7 @@ innovations cannot see.
 
 - **Radar** (:class:`AdaptiveRadarR`): three channels of the polar model, the range in
   metres and the azimuth and elevation in radians (a sample across the line of sight is
-  divided by the horizontal range, or by the slant range times the ground-multipath gain).
+  divided by the horizontal range, or by the slant range).
 - **RF** (:class:`AdaptiveRfR`): one channel, the scale of each fix's CEP-derived sigma (the
   mean of the east and north samples divided by the fix's unit variance ``(CEP /
   1.1774)^2``), from fixes that update a track the radar does not hold.
@@ -142,14 +142,10 @@ class AdaptiveRadarR:
             return
         k = -du / (rho * r)
         nu = (z[0] - x[0], z[1] - x[1], z[2] - x[2])
-        gain = 1.0
-        if m.low_el_gain:
-            el_deg = math.degrees(math.atan2(abs(du), rho))
-            gain += m.low_el_gain * math.exp(-el_deg / m.low_el_deg)
         axes = (
             (self.range, (de / r, dn / r, du / r), 1.0),
             (self.az, (-dn / rho, de / rho, 0.0), rho),
-            (self.el, (de * k, dn * k, rho / r), r * gain),
+            (self.el, (de * k, dn * k, rho / r), r),
         )
         for ch, a, scale in axes:
             d = a[0] * nu[0] + a[1] * nu[1] + a[2] * nu[2]

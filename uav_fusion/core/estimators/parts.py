@@ -96,10 +96,7 @@ class PolarRadarR:
         R = s_r^2 u_r u_r^T + (rho s_az)^2 u_az u_az^T + (r s_el)^2 u_el u_el^T + f^2 I
 
     (angle errors in radians become cross-range errors that grow with range; ``f`` is a floor
-    for what the polar model leaves out, e.g. the onboard tracker's smoothing). Near the
-    horizon the ground reflection interferes with the direct return and spoils the elevation
-    measurement: ``s_el`` is multiplied by ``1 + low_el_gain * exp(-|el| / low_el_deg)``
-    (``low_el_gain`` 0: no inflation).
+    for what the polar model leaves out, e.g. the onboard tracker's smoothing).
     """
 
     radar_enu: tuple[float, float, float]
@@ -107,8 +104,6 @@ class PolarRadarR:
     sigma_az_rad: float
     sigma_el_rad: float
     floor_m: float = 0.0
-    low_el_gain: float = 0.0
-    low_el_deg: float = 4.0
     # (radar east, north, up, floor^2, sigma_range^2): read once per report
     _consts: tuple[float, float, float, float, float] = field(init=False, repr=False, compare=False)
 
@@ -137,9 +132,6 @@ class PolarRadarR:
             l0, l1, l2 = 0.0, 1.0, 0.0
         saz = rho * self.sigma_az_rad
         sel = r * self.sigma_el_rad
-        if self.low_el_gain:
-            el_deg = math.degrees(math.atan2(abs(du), rho))
-            sel *= 1.0 + self.low_el_gain * math.exp(-el_deg / self.low_el_deg)
         a2 = saz * saz
         e2 = sel * sel
         ra0, ra1, ra2 = sr2 * u0, sr2 * u1, sr2 * u2
@@ -359,8 +351,6 @@ def radar_model_from_profile(profile: Profile, site: Site) -> RadarRModel:
             math.radians(profile.radar_sigma_az_deg),
             math.radians(profile.radar_sigma_el_deg),
             profile.radar_floor_m,
-            profile.radar_low_el_gain,
-            profile.radar_low_el_deg,
         )
     assert profile.r_radar is not None  # the profile's checks
     return FixedRadarR(pack_r(profile.r_radar))

@@ -86,8 +86,6 @@ class Profile:
     radar_sigma_az_deg: float = 1.5
     radar_sigma_el_deg: float = 1.5
     radar_floor_m: float = 0.0
-    radar_low_el_gain: float = 0.0
-    radar_low_el_deg: float = 4.0
     adaptive_window: int | None = None  # online R from the innovations over this many
     adaptive_bound: float = 2.0  # ... within [spec / bound, spec * bound]
     rf_model: str = "fixed"  # fixed (r_rf) | cep

@@ -149,12 +149,6 @@ _MEASUREMENT = (
         _k("floor_m", "radar_floor_m", NUMBER, FITTED, "polar model: standard deviation added "
            "on each axis (successive reports' errors are correlated)", unit="m",
            bounds=">= 0", fit=TUNED),
-        _k("low_el_gain", "radar_low_el_gain", NUMBER, FITTED, "ground multipath: the "
-           "elevation sigma is multiplied by 1 + low_el_gain exp(-el / low_el_deg)",
-           bounds=">= 0", fit=TUNED),
-        _k("low_el_deg", "radar_low_el_deg", NUMBER, FITTED, "the elevation scale of the "
-           "ground-multipath term (4 deg: the twin's own multipath scale, not a property of "
-           "the radar)", unit="deg", bounds="> 0", fit=TUNED),
     ),
     _k("measurement.rf.R", "r_rf", MATRIX, FITTED, "RF covariance (east, north) of the paper's "
        "estimator and the fixed model", unit="m^2", size=2,
@@ -384,6 +378,10 @@ _EARLY_BIRTH = (
     "a strong object moving at association.stationary.speed_mps or more starts a track from "
     "the age association.class.tau_s"
 )
+_LOW_EL = (
+    "gone: the elevation sigma is the radar's specification, raised online where the "
+    "innovations show more (measurement.adaptive)"
+)
 #: Keys that have left the schema, with what a profile that still sets one should do.
 RETIRED: dict[str, str] = {
     "update.vz_hold_after_s": "it is update.hold_after_s",
@@ -417,6 +415,8 @@ RETIRED: dict[str, str] = {
     "update.huber_k": "gone with the huber update (the trackers' update is Student-t)",
     "update.robust": "the trackers' update is always Student-t with 4 degrees of freedom "
     "(R / w, w = (4 + m) / (4 + NIS) at most 1); the paper's estimator has none",
+    "measurement.radar.low_el_gain": _LOW_EL,
+    "measurement.radar.low_el_deg": _LOW_EL,
     "multi.early_birth_age_s": _EARLY_BIRTH,
     "multi.early_birth_speed_mps": _EARLY_BIRTH,
 }
