@@ -17,6 +17,7 @@ import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import Profile, load_profile, profile_from_dict
+from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.emitters import UNKNOWN_EMITTER, emitter_key
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.kalman import merge_nis, velocity_nis
@@ -443,6 +444,32 @@ def test_inside_radar_cover_a_track_is_published_while_the_radar_saw_it_recently
     assert mt.tracks and mt.tracks[0].emitter == emitter_key(FREQ_A)  # alive on its fixes
 
 
+@pytest.mark.parametrize("coast", [2.0, 3.0])
+def test_beyond_radar_cover_a_track_is_published_while_its_last_update_is_recent(
+    site: Site, coast: float
+) -> None:
+    """A UAV 1.5 km out, beyond the radar's range gate, that only its link's fixes (every
+    4 s) place: its track is published at an epoch exactly when the last fix is at most
+    ``output_coast_s`` old."""
+
+    def path(tau: float) -> np.ndarray:
+        a = 0.8 + 0.004 * tau
+        return np.array([1500.0 * math.cos(a), 1500.0 * math.sin(a), 60.0])
+
+    uav = Uav(path, 10, seen=lambda tau: False, freq_hz=FREQ_A)
+    stream = scene_stream(site, [uav], 90.0, 5)
+    fixes = [it.t for it in stream if isinstance(it, RfAttempt)]
+    mt = MultiTracker(load_profile("tracker"), site, MultiSettings(output_coast_s=coast))
+    assert np.linalg.norm(path(0.0)) > (mt.profile.range_gate_m or math.inf)
+    epochs = run_multi(mt, stream, 4.0, 1000.0, 1089.0)
+    confirmed = next(ep.t for ep in epochs if ep.tracks)
+    checked = [ep for ep in epochs if ep.t >= confirmed + 4.0]
+    assert len(checked) > 200
+    for ep in checked:
+        age = ep.t - max(f for f in fixes if f <= ep.t)
+        assert bool(_near(site, ep, path, within=100.0)) == (age <= coast), (ep.t, age)
+
+
 def test_a_grounded_emitter_does_not_take_over_another_uavs_radar_track(site: Site) -> None:
     """A UAV on its pad with its link on, and a silent UAV taking off 150 m away: the silent
     UAV's track carries no emitter, and nothing is published on the pad."""
@@ -550,6 +577,41 @@ def test_a_far_uav_the_radar_puts_under_the_ground_is_born_but_a_near_mirror_ima
             o = ep.tracks[0]
             assert np.linalg.norm(o.x[:2] - (r0 + path(ep.t - 1000.0))[:2]) < 40.0
             assert o.x[2] > r0[2]  # the height prior, not the reports' -30 m
+
+
+@pytest.mark.parametrize("hold", [5.0, 9.0])
+def test_the_climb_rate_hold_starts_with_the_first_fix_after_its_delay(
+    site: Site, hold: float
+) -> None:
+    """A UAV on a loop 400 m out climbs at 1 m/s and levels off as the radar loses it
+    (60 s); its link's fixes go on every 4 s. The first fix more than ``update.hold_after_s``
+    after the track's last radar update holds its climb rate near 0, and not one before: the
+    run is the same as one without the hold up to that fix, and differs from it there."""
+
+    def path(tau: float) -> np.ndarray:
+        a = 0.02 * tau
+        return np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 40.0 + min(tau, 60.0)])
+
+    stream = scene_stream(
+        site, [Uav(path, 41, seen=lambda tau: tau < 60.0, freq_hz=FREQ_A)], 100.0, 8
+    )
+    runs = []
+    for p in (load_profile("tracker").with_changes(hold_after_s=h) for h in (hold, None)):
+        mt = MultiTracker(p, site)
+        climb: list[tuple[float, float]] = []  # (t, climb rate) after each fix after 60 s
+        for item in stream:
+            feed(mt, item)
+            if isinstance(item, RfAttempt) and item.t > 1060.0:
+                (tr,) = [tr for tr in mt.tracks if tr.confirmed]
+                climb.append((item.t, float(tr.filter.mean()[0][5])))
+        runs.append((climb, tr.last_radar_t))
+    (held, last_radar), (free, _) = runs
+    assert last_radar is not None and 1059.0 < last_radar < 1060.0
+    assert min(vz for _, vz in free) > 0.7  # without the hold the radar's climb rate runs on
+    first = next(t for t, _ in held if t - last_radar > hold)
+    assert any(t < first for t, _ in held)
+    assert [vz for t, vz in held if t < first] == [vz for t, vz in free if t < first]
+    assert all(h < f for (t, h), (_, f) in zip(held, free, strict=True) if t >= first)
 
 
 def test_an_emitter_whose_fixes_keep_missing_its_track_moves_to_the_right_one(

@@ -494,6 +494,48 @@ def test_a_hover_the_radar_cannot_see_stops_the_coast_drifting(site: Site) -> No
         assert (t_gate.counters.get("notch", 0) > 0) is held, gate
 
 
+class LevelOffScene(Scene):
+    """The loop of :class:`Scene`, climbing at 1 m/s from 40 m until ``LEVEL_S``, then level."""
+
+    LEVEL_S = 60.0
+
+    def uav(self, t: float) -> np.ndarray:
+        p = super().uav(t)
+        p[2] = 40.0 + min(t, self.LEVEL_S)
+        return p
+
+
+@pytest.mark.parametrize("hold", [5.0, 9.0])
+def test_the_climb_rate_hold_starts_with_the_first_fix_after_its_delay(
+    site: Site, hold: float
+) -> None:
+    """The radar loses the UAV as it levels off; RF fixes go on every 4 s (2D: they say
+    nothing of height). The first fix more than ``update.hold_after_s`` after the last 3D
+    update, and every later one, holds the climb rate near 0; the fixes before leave it."""
+    level = LevelOffScene.LEVEL_S
+    prof = load_profile("tracker").with_changes(hold_after_s=hold)
+    sc = LevelOffScene(site, seed=21)
+    sc.build(100.0, uav_visible=lambda t: t < level)
+    tracker = Tracker(prof, site)
+    fixes: list[tuple[float, bool, float]] = []  # (t, held, climb rate after) per fix
+    for item in sc.stream():
+        if isinstance(item, RadarFrame) and not item.tracks:
+            continue  # frames without a report are skipped, as the runners do
+        held0 = tracker.counters.get("vz_hold", 0)
+        feed(tracker, item)
+        if isinstance(item, RfAttempt) and item.t > level:
+            x, _ = tracker.predict_to(item.t)
+            fixes.append((item.t, tracker.counters.get("vz_hold", 0) > held0, float(x[5])))
+    last_3d = tracker.last_3d_t
+    assert last_3d is not None and level - 1.0 < last_3d < level
+    assert [held for _, held, _ in fixes] == [t - last_3d > hold for t, _, _ in fixes]
+    before = [vz for t, held, vz in fixes if not held]
+    after = [vz for t, held, vz in fixes if held]
+    assert before and after
+    assert min(before) > 0.7  # the climb rate the radar last saw, still running
+    assert after[-1] < before[-1]  # held towards 0
+
+
 def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
     sc = Scene(site, seed=4)
     gap = (80.0, 140.0)  # neither radar nor RF for 60 s (beyond max_coast_s)
