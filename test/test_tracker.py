@@ -505,13 +505,15 @@ class LevelOffScene(Scene):
         return p
 
 
-@pytest.mark.parametrize("hold", [5.0, 9.0])
+@pytest.mark.parametrize("hold", [5.0, 6.0, 6.5])
 def test_the_climb_rate_hold_starts_with_the_first_fix_after_its_delay(
     site: Site, hold: float
 ) -> None:
     """The radar loses the UAV as it levels off; RF fixes go on every 4 s (2D: they say
     nothing of height). The first fix more than ``update.hold_after_s`` after the last 3D
-    update, and every later one, holds the climb rate near 0; the fixes before leave it."""
+    update, and every later one, holds the climb rate near 0; the fixes before leave it.
+    The delays 6 and 6.5 s lie either side of the second fix (6.3 s after the last 3D
+    update)."""
     level = LevelOffScene.LEVEL_S
     prof = load_profile("tracker").with_changes(hold_after_s=hold)
     sc = LevelOffScene(site, seed=21)
