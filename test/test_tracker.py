@@ -538,6 +538,34 @@ def test_the_climb_rate_hold_starts_with_the_first_fix_after_its_delay(
     assert after[-1] < before[-1]  # held towards 0
 
 
+@pytest.mark.parametrize("n", [2, 4, 6])
+def test_a_strong_radar_object_starts_or_confirms_the_track_at_its_nth_report(
+    site: Site, n: int
+) -> None:
+    """A radar object classed UAV at 0.9 scores enough to start a track from its first
+    report, so ``association.thresholds.init_min_reports`` alone says when: it starts the
+    track with its n-th report, and it confirms at its n-th report a tentative track that an
+    RF fix started before the radar saw the UAV (its earlier reports are discarded)."""
+    prof = load_profile("tracker")
+    prof = dataclasses.replace(prof, score=dataclasses.replace(prof.score, init_min_reports=n))
+    sc = Scene(site, seed=3)
+    sc.build(20.0, rf_ok=lambda t: False, uav_prob=lambda t: 0.9)
+    steps = run_tracker(Tracker(prof, site), sc.stream())
+    first = next(s for s in steps if s.source == "radar" and s.updated)
+    assert (first.t, first.status) == ((n - 1) * 0.25, "initialised")
+
+    sc = Scene(site, seed=3)
+    sc.build(20.0, uav_visible=lambda t: t >= 3.0, uav_prob=lambda t: 0.9)
+    tracker = Tracker(prof, site)
+    steps = run_tracker(tracker, sc.stream())
+    rf = [s for s in steps if s.source == "rf"]
+    assert rf[0].t == pytest.approx(2.05) and rf[0].status == "tentative"
+    radar = [s for s in steps if s.source == "radar" and s.t < 6.0]
+    assert [s.reason for s in radar[: n - 1]] == ["tentative_track"] * (n - 1)
+    assert radar[n - 1].updated and radar[n - 1].t == 3.0 + (n - 1) * 0.25
+    assert tracker.counters.get("confirmed", 0) == 1
+
+
 def test_a_leg_out_of_coverage_recovers(site: Site) -> None:
     sc = Scene(site, seed=4)
     gap = (80.0, 140.0)  # neither radar nor RF for 60 s (beyond max_coast_s)
