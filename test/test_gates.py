@@ -317,6 +317,23 @@ def test_the_ground_rule_at_its_edges() -> None:
     assert gates.refuse_start(obj, 25.1, 0.0, 0.0) == "ground"
 
 
+def test_a_still_object_with_a_moving_part_counts_as_stationary_from_its_minimum_age() -> None:
+    """Near the ground, an object whose Doppler speed says it moves (the radar sees a fan or
+    a flag through its moving part) but whose positions stand still is stationary once it is
+    ``stationary.min_age_s`` old, not before: a young object's few positions say little."""
+    cfg = ScoreConfig(ground_alt_m=4.0, stationary_speed_mps=1.5, stationary_min_age_s=8.0)
+    gates = PhysicalGates(cfg, max_speed_mps=30.0)
+    obj = RadarObject(GROUND_ID, 0.0)
+    obj.up, obj.sd_up, obj.speed = 2.0, 3.0, 5.0
+    for k in range(32):  # 4 Hz up to 7.75 s, scattering by half a metre about one point
+        obj.drift.add(0.25 * k, 100.0 + 0.5 * math.sin(1.3 * k), 200.0 + 0.5 * math.cos(0.7 * k))
+    assert obj.drift.still(1.5)
+    obj.last_t = 7.9
+    assert not gates.grounded(obj)
+    obj.last_t = 8.0
+    assert gates.grounded(obj)
+
+
 def test_the_takeover_reach_gate_at_its_edge(site: Site) -> None:
     tr = Tracker(_profile(), site)
     assert tr.cfg.reach_margin_m == 200.0 and tr.profile.max_speed_mps == 30.0
