@@ -22,6 +22,7 @@ from uav_fusion.core.estimators.models import (
     kf_update_joseph,
     position_h,
 )
+from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.estimators.parts import (
     CepRfR,
     Deleter,
@@ -36,6 +37,7 @@ from uav_fusion.core.estimators.parts import (
     robust_from_profile,
 )
 from uav_fusion.core.profiles.checks import validate_transition
+from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import RadarFrame, RadarTrack
 
 RAD = math.radians
@@ -370,3 +372,42 @@ def test_a_track_starts_level_from_an_object_seen_climbing(flat: bool) -> None:
         assert P[2, 2] == pytest.approx(profile.rf_init_altitude_std_m**2)
     else:
         assert x[2] == pytest.approx(obj.kf.x[2])
+
+
+# --- the UAV score's cues -------------------------------------------------------------------
+def _airborne_object(**fields: float) -> RadarObject:
+    """A radar object 20 s old, 60 m up, moving at 8 m/s with a small UAV's RCS and a calm
+    filter: none of the score's penalties applies; ``fields`` change that."""
+    obj = RadarObject(7, 0.0)
+    obj.last_t, obj.n_reports = 20.0, 80
+    obj.up, obj.sd_up, obj.speed = 60.0, 3.0, 8.0
+    obj.rcs_mean, obj.rcs_seen, obj.nis_mean = -10.0, True, 1.0
+    for name, value in fields.items():
+        setattr(obj, name, value)
+    return obj
+
+
+def test_the_uav_score_cues_at_their_edges() -> None:
+    """Each penalty of the UAV score either side of its threshold: the score differs by
+    exactly that penalty's weight (the age term is full from 5 s on, so ages 7.9 and 8 s
+    score alike without the stationary cue)."""
+    cfg = ScoreConfig(class_tau_s=5.0)
+    base = _airborne_object().score(cfg)
+
+    def lost(**fields: float) -> float:
+        return base - _airborne_object(**fields).score(cfg)
+
+    # stationary: slower than stationary_speed_mps (1.5 m/s) from stationary_min_age_s (8 s)
+    assert lost(speed=1.4, last_t=8.0) == pytest.approx(cfg.stationary_weight)
+    assert lost(speed=1.4, last_t=7.9) == pytest.approx(0.0)
+    assert lost(speed=1.6, last_t=8.0) == pytest.approx(0.0)
+    # a vehicle: moving below ground_alt_m (4 m) with a car's RCS (large_rcs_dbsm, 0 dBsm, and
+    # up, which also costs large_rcs_weight)
+    car = cfg.ground_weight + cfg.large_rcs_weight
+    assert lost(up=3.9, rcs_mean=0.0) == pytest.approx(car)
+    assert lost(up=4.1, rcs_mean=0.0) == pytest.approx(cfg.large_rcs_weight)
+    assert lost(up=3.9, rcs_mean=-0.1) == pytest.approx(0.0)
+    # a bird: a mean NIS above erratic_nis (6) with a mean RCS below bird_rcs_dbsm (-15 dBsm)
+    assert lost(nis_mean=6.1, rcs_mean=-15.1) == pytest.approx(cfg.erratic_weight)
+    assert lost(nis_mean=5.9, rcs_mean=-15.1) == pytest.approx(0.0)
+    assert lost(nis_mean=6.1, rcs_mean=-14.9) == pytest.approx(0.0)
