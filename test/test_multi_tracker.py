@@ -579,6 +579,27 @@ def test_a_far_uav_the_radar_puts_under_the_ground_is_born_but_a_near_mirror_ima
             assert o.x[2] > r0[2]  # the height prior, not the reports' -30 m
 
 
+@pytest.mark.parametrize("n", [4, 6, 8])
+def test_a_strong_object_with_rf_support_is_born_at_its_nth_report(site: Site, n: int) -> None:
+    """A UAV the radar classes at 0.8 from the start, 400 m out, its link's first fix at
+    0.55 s: with RF support an object starts a track at once, so from the first frame after
+    that fix ``association.thresholds.init_min_reports`` alone says when: its n-th report."""
+
+    def path(tau: float) -> np.ndarray:
+        a = 0.02 * tau
+        return np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 60.0])
+
+    prof = load_profile("tracker")
+    prof = dataclasses.replace(prof, score=dataclasses.replace(prof.score, init_min_reports=n))
+    mt = MultiTracker(prof, site)
+    born = None
+    for item in scene_stream(site, [Uav(path, 41, freq_hz=FREQ_A)], 10.0, 8):
+        feed(mt, item)
+        if born is None and any(tr.confirmed for tr in mt.tracks):
+            born = item
+    assert isinstance(born, RadarFrame) and born.t == 1000.0 + (n - 1) * 0.25
+
+
 @pytest.mark.parametrize("hold", [5.0, 9.0])
 def test_the_climb_rate_hold_starts_with_the_first_fix_after_its_delay(
     site: Site, hold: float
