@@ -553,6 +553,33 @@ def test_reports_below_the_ground_still_place_the_uav(site: Site) -> None:
         assert o.x[2] > r0[2] - 20.0
 
 
+@pytest.mark.parametrize("depth", [-4.9, -5.1])
+def test_a_report_below_the_ground_updates_the_height_only_above_below_ground_m(
+    site: Site, depth: float
+) -> None:
+    """For 20 s the radar puts the UAV (40 m above the radar, 400 m out) at a height of
+    ``depth``: a report less than ``association.ghost.below_ground_m`` (5 m) under the
+    ground still updates the track's height and pulls it down; one deeper updates east and
+    north only, and the height stays."""
+
+    def path(tau: float) -> np.ndarray:
+        a = 0.02 * tau
+        return np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 40.0])
+
+    stream: list[RadarFrame | RfAttempt] = []
+    for item in scene_stream(site, [Uav(path, 31)], 80.0, 2):
+        if isinstance(item, RadarFrame) and 1040.0 <= item.t < 1060.0:
+            item = RadarFrame(item.t, tuple(dataclasses.replace(r, u=depth) for r in item.tracks))
+        stream.append(item)
+    epochs = run_multi(MultiTracker(load_profile("tracker"), site), stream, 1.0, 1000.0, 1079.0)
+    (track,) = next(ep for ep in epochs if ep.t == 1059.0).tracks
+    true_up = site.radar.enu[2] + 40.0
+    if depth > -5.0:
+        assert track.x[2] < true_up - 40.0  # pulled down to the reports
+    else:
+        assert abs(track.x[2] - true_up) < 5.0  # held where it was
+
+
 def test_a_far_uav_the_radar_puts_under_the_ground_is_born_but_a_near_mirror_image_is_not(
     site: Site,
 ) -> None:
