@@ -553,6 +553,16 @@ def test_reports_below_the_ground_still_place_the_uav(site: Site) -> None:
         assert o.x[2] > r0[2] - 20.0
 
 
+def _loop_400(height: Callable[[float], float]) -> Path3:
+    """A slow loop 400 m from the radar at ``height(tau)`` above it."""
+
+    def path(tau: float) -> np.ndarray:
+        a = 0.02 * tau
+        return np.array([400.0 * math.cos(a), 400.0 * math.sin(a), height(tau)])
+
+    return path
+
+
 @pytest.mark.parametrize("depth", [-4.9, -5.1])
 def test_a_report_below_the_ground_updates_the_height_only_above_below_ground_m(
     site: Site, depth: float
@@ -562,9 +572,7 @@ def test_a_report_below_the_ground_updates_the_height_only_above_below_ground_m(
     ground still updates the track's height and pulls it down; one deeper updates east and
     north only, and the height stays."""
 
-    def path(tau: float) -> np.ndarray:
-        a = 0.02 * tau
-        return np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 40.0])
+    path = _loop_400(lambda tau: 40.0)
 
     stream: list[RadarFrame | RfAttempt] = []
     for item in scene_stream(site, [Uav(path, 31)], 80.0, 2):
@@ -612,9 +620,7 @@ def test_a_strong_object_with_rf_support_is_born_at_its_nth_report(site: Site, n
     0.55 s: with RF support an object starts a track at once, so from the first frame after
     that fix ``association.thresholds.init_min_reports`` alone says when: its n-th report."""
 
-    def path(tau: float) -> np.ndarray:
-        a = 0.02 * tau
-        return np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 60.0])
+    path = _loop_400(lambda tau: 60.0)
 
     prof = load_profile("tracker")
     prof = dataclasses.replace(prof, score=dataclasses.replace(prof.score, init_min_reports=n))
@@ -636,9 +642,7 @@ def test_the_climb_rate_hold_starts_with_the_first_fix_after_its_delay(
     after the track's last radar update holds its climb rate near 0, and not one before: the
     run is the same as one without the hold up to that fix, and differs from it there."""
 
-    def path(tau: float) -> np.ndarray:
-        a = 0.02 * tau
-        return np.array([400.0 * math.cos(a), 400.0 * math.sin(a), 40.0 + min(tau, 60.0)])
+    path = _loop_400(lambda tau: 40.0 + min(tau, 60.0))
 
     stream = scene_stream(
         site, [Uav(path, 41, seen=lambda tau: tau < 60.0, freq_hz=FREQ_A)], 100.0, 8
