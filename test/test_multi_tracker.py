@@ -22,6 +22,7 @@ from uav_fusion.core.estimators.emitters import UNKNOWN_EMITTER, emitter_key
 from uav_fusion.core.estimators.grid import GridEpoch, TrackOutput
 from uav_fusion.core.estimators.kalman import merge_nis, velocity_nis
 from uav_fusion.core.estimators.multi import MultiTracker, run_multi
+from uav_fusion.core.estimators.objects import RadarObject
 from uav_fusion.core.profiles.settings import MultiSettings
 from uav_fusion.core.records import RadarFrame, RadarTrack, RfAttempt
 from uav_fusion.core.site import RadarCalibration, Site, load_site
@@ -869,3 +870,53 @@ def test_an_emitting_uav_is_followed_where_its_fixes_put_a_radar_track_still_cla
             assert epochs[-1].tracks[0].emitter == emitter_key(FREQ_A)
         assert first[seed, 0.0] <= 34.0 and first[seed, None] - first[seed, 0.0] >= 3.0  # 33, 37
     assert MultiSettings().emitter_follow_min == 0.0
+
+
+def test_a_strong_objects_age_for_a_birth_at_each_rules_edge(site: Site) -> None:
+    """When a strong radar object is old enough to start a track: at
+    ``association.stationary.min_age_s`` whatever its speed; at ``association.class.tau_s``
+    when its mean speed is at least ``stationary.speed_mps``; at any age with an RF fix
+    credited to it within ``track.max_coast_s`` (the score's ``rf_tau_s``), not with an
+    older one."""
+    mt = MultiTracker(load_profile("tracker"), site)
+    cfg = mt.cfg
+    v, still_age, tau = cfg.stationary_speed_mps, cfg.stationary_min_age_s, cfg.class_tau_s
+    assert 0.0 < tau < still_age and cfg.rf_tau_s == 20.0
+
+    def old_enough(age: float, speed: float, fix_age: float | None = None) -> bool:
+        obj = RadarObject(7, 1000.0)
+        obj.last_t = 1000.0 + age
+        obj.speed = speed
+        if fix_age is not None:
+            obj.rf_support = 1.0
+            obj.rf_t = obj.last_t - fix_age
+        return mt._old_enough(obj, obj.last_t)
+
+    assert old_enough(still_age, 0.0) and not old_enough(still_age - 0.01, 0.99 * v)
+    assert old_enough(tau, v) and not old_enough(tau - 0.01, 2.0 * v)
+    assert not old_enough(tau, 0.99 * v)
+    assert old_enough(0.0, 0.0, fix_age=cfg.rf_tau_s)
+    assert not old_enough(0.0, 0.0, fix_age=1.01 * cfg.rf_tau_s)
+
+
+def test_a_silent_uav_is_born_only_once_its_score_reaches_init_min(site: Site) -> None:
+    """A silent UAV the radar classes at 0.8 on a loop 400 m out: once its class history and
+    age term are full its score stays at the same value, so ``init_min`` a hair above that
+    value gives it no track and a hair below gives it one."""
+    path = _loop_400(lambda tau: 60.0)
+    stream = scene_stream(site, [Uav(path, 52)], 30.0, 9)
+    base = load_profile("tracker")
+
+    def run(init_min: float) -> MultiTracker:
+        prof = dataclasses.replace(base, score=dataclasses.replace(base.score, init_min=init_min))
+        mt = MultiTracker(prof, site)
+        for item in stream:
+            feed(mt, item)
+        return mt
+
+    probe = run(1e9)
+    assert not probe.tracks
+    s = probe.objects.objects[52].score(probe.cfg, fused=False)
+    assert s > base.score.follow_min
+    assert any(tr.confirmed for tr in run(s - 0.01).tracks)
+    assert not run(s + 0.01).tracks

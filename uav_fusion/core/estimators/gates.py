@@ -107,7 +107,7 @@ class PhysicalGates:
 
     def corroborated(self, obj: RadarObject, t: float) -> bool:
         """Whether an RF fix was credited to ``obj`` within ``rf_tau_s`` of ``t``."""
-        return obj.rf_support > 0.0 and self.tau > 0.0 and t - obj.rf_t <= self.tau
+        return obj.rf_recent(t, self.tau)
 
     def grounded(self, obj: RadarObject) -> bool:
         """Whether ``obj`` is near the ground and stationary (the object table's averages)."""

@@ -382,7 +382,7 @@ class MultiTracker:
                     efm is None
                     or s < efm
                     or obj.rf_key is None
-                    or obj.rf_support_at(t, cfg.rf_tau_s) <= 0.0
+                    or not obj.rf_recent(t, cfg.rf_tau_s)
                 ):
                     continue
                 weak.add(len(cands))
@@ -489,11 +489,11 @@ class MultiTracker:
         """Whether a strong object has been seen long enough to start a track: for the
         score's ``stationary_min_age_s`` (by then clutter has shown that it stands still); for
         ``class_tau_s`` (its class history and age term are full) while its mean speed is at
-        least ``stationary_speed_mps`` (it does not stand still); or at any age with RF
-        support."""
+        least ``stationary_speed_mps`` (it does not stand still); or at any age with an RF fix
+        credited to it within ``rf_tau_s``."""
         cfg = self.cfg
         age = obj.age_s
-        if age >= cfg.stationary_min_age_s or obj.rf_support_at(t, cfg.rf_tau_s) > 0.0:
+        if age >= cfg.stationary_min_age_s or obj.rf_recent(t, cfg.rf_tau_s):
             return True
         return age >= cfg.class_tau_s and obj.speed >= cfg.stationary_speed_mps
 

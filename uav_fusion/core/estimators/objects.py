@@ -212,6 +212,11 @@ class RadarObject:
             return 0.0
         return self.rf_support * math.exp(-(t - self.rf_t) / tau) if tau > 0 else 0.0
 
+    def rf_recent(self, t: float, tau: float) -> bool:
+        """Whether an RF fix was credited to the object within ``tau`` of ``t`` (its RF
+        support, fading with ``tau`` as time constant, is then still worth counting)."""
+        return self.rf_support > 0.0 and tau > 0.0 and t - self.rf_t <= tau
+
     def below_ground(self, cfg: ScoreConfig) -> bool:
         """Clearly below the ground (see the module text): nothing real flies there."""
         lim = cfg.below_ground_m
