@@ -81,3 +81,37 @@ def test_two_radar_objects_side_by_side_stay_two_uavs_while_both_are_seen(
     mt2._merge(T0)
     mt2._merge(t)
     assert mt2.tracks == [o2]
+
+
+@pytest.mark.parametrize(("scale", "merged"), [(0.99, True), (1.01, False)])
+def test_tracks_merge_only_inside_merge_nis(scale: float, merged: bool) -> None:
+    """``merge_nis`` at its edge: neither track has a recent radar update, so their
+    horizontal positions are compared (2 dof) on the sum of their covariances (25 + 25 m^2
+    per axis): apart by just under ``sqrt(50 merge_nis)`` they merge after ``merge_s``, by
+    just over it they never do."""
+    mt, older, younger = _pair(3.0)
+    d = scale * float(np.sqrt(50.0 * mt.settings.merge_nis))
+    younger.filter.set_state(
+        [d, 500.0, 60.0, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
+    )
+    for k in range(5):
+        mt._merge(T0 + k)
+    assert (mt.tracks == [older]) is merged
+
+
+def test_a_horizontal_update_keeps_the_track_above_the_ground_beyond_below_ground_m() -> None:
+    """Before an update without height, a track more than ``below_ground_m`` under the
+    ground is pulled up by a pseudo-measurement of height 0 with that sigma (with a vertical
+    variance of 100 m^2 and a 5 m sigma, four fifths of the way); one less deep is left where
+    it is."""
+    mt = MultiTracker(load_profile("tracker"), load_site())
+    lim = mt.cfg.below_ground_m
+    assert lim == 5.0
+    for depth, want in ((1.01 * lim, -0.2 * 1.01 * lim), (0.99 * lim, -0.99 * lim)):
+        tr = _track(1, T0, 0.0)
+        tr.filter.set_state(
+            [0.0, 500.0, -depth, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
+        )
+        mt._hold_height(tr)
+        x, _ = tr.filter.mean()
+        assert x[2] == pytest.approx(want)

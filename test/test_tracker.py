@@ -1272,3 +1272,85 @@ def test_the_class_history_is_an_average_of_the_reports_logits() -> None:
     obj = table.update(rep(13.0, 0.9999))  # logit 9.2, clipped to 3
     a = math.exp(-2.0 / 3.0)
     assert obj.class_logit == pytest.approx(prev * a + 3.0 * (1.0 - a), abs=1e-12)
+
+
+def test_an_rf_fix_credits_an_object_reported_within_the_window() -> None:
+    """``rf_window_s`` at its edge: a fix credits an object whose last report is at most that
+    long before (or after) it, and no object reported longer ago (its filter's prediction
+    would have drifted)."""
+    cfg = ScoreConfig()
+    w = cfg.rf_window_s
+    assert w > 0.0
+    for gap, credited in ((0.99 * w, True), (1.01 * w, False), (-0.99 * w, True)):
+        table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
+        for k in range(5):
+            table.update(
+                RadarTrack(100.0 + k, 1, 0.0, 0.0, 0.0, 500.0, 300.0, 50.0, (0.0, 0.0, 0.0),
+                           0.5, None, -10.0)
+            )  # fmt: skip
+        assert table.rf_fix(104.0 + gap, 505.0, 300.0, 400.0) == int(credited)
+        assert (table.credited is table.objects[1]) == credited
+
+
+def _contra_scene(site: Site, decoy_from: float) -> Scene:
+    """The UAV on its loop, lost to the radar for 20 s from t = 100 s (RF goes on); a decoy
+    classed 0.7, moving at 3 m/s 1 km beyond the loop, reports from ``decoy_from``: always
+    outside the track's gate, and out of reach."""
+
+    def seen(t: float) -> bool:
+        return not 100.0 <= t < 120.0
+
+    def decoy(sc: Scene, t: float, k: int) -> RadarTrack | None:
+        if t < decoy_from:
+            return None
+        p = sc.r0 + np.array([-1500.0 + 3.0 * t, 200.0, 60.0])
+        return sc.report(t, DECOY_ID, p, 0.7, np.array([3.0, 0.0, 0.0]))
+
+    sc = Scene(site, seed=12)
+    sc.build(130.0, uav_visible=seen, fragment_s=1000.0, decoy=decoy)
+    return sc
+
+
+def test_a_strong_object_outside_the_gate_makes_a_rejection_only_from_init_min(
+    site: Site,
+) -> None:
+    """While the object the track follows is silent, another object's report outside the gate
+    is a rejection of the track (a ``coasted`` step) only when that object could start a
+    track: a score of at least ``init_min``; otherwise it is discarded (``nis``). The decoy's
+    score is constant once its class history and age term are full, so ``init_min`` set a
+    hair either side of it decides."""
+    sc = _contra_scene(site, 0.0)
+    items = sc.stream()
+    base = load_profile("tracker")
+    probe = Tracker(base, site)
+    run_tracker(probe, items)
+    s = probe.objects.objects[DECOY_ID].score(probe.cfg)
+    assert base.score.follow_min < s
+
+    def rejections(init_min: float) -> list[TrackerStep]:
+        prof = dataclasses.replace(base, score=dataclasses.replace(base.score, init_min=init_min))
+        steps = run_tracker(Tracker(prof, site), items)
+        gap = [x for x in steps if 101.0 <= x.t < 120.0 and x.track_id == DECOY_ID]
+        assert len(gap) > 60 and not any(x.updated for x in gap)
+        return [x for x in gap if x.coasted]
+
+    assert len(rejections(s - 0.01)) > 60
+    assert rejections(s + 0.01) == []
+
+
+@pytest.mark.parametrize("n", [4, 6])
+def test_an_object_outside_the_gate_makes_a_rejection_from_its_nth_report(
+    site: Site, n: int
+) -> None:
+    """The decoy above first reports 2 s into the radar gap: its reports are rejections of the
+    track from its ``init_min_reports``-th on, not before."""
+    sc = _contra_scene(site, 102.0)
+    base = load_profile("tracker")
+    prof = dataclasses.replace(
+        base, score=dataclasses.replace(base.score, init_min=0.0, init_min_reports=n)
+    )
+    steps = run_tracker(Tracker(prof, site), sc.stream())
+    mine = [x for x in steps if x.track_id == DECOY_ID]
+    assert len(mine) > 40 and all(x.t >= 102.0 for x in mine)
+    first = next(k for k, x in enumerate(mine) if x.coasted)
+    assert first == n - 1
