@@ -1,8 +1,12 @@
-"""The multi-UAV tracker's merge rule at its boundaries (``multi.merge_s``): two confirmed
-tracks that stay close are one UAV only once they have been close for ``merge_s``, and not
-while each has been updated by a different radar object within ``merge_s``."""
+"""The multi-UAV tracker's rules between tracks, at their boundaries: two confirmed tracks
+that stay close (``multi.merge_nis``) are one UAV only once they have been close for
+``merge_s``, and not while each has been updated by a different radar object within
+``merge_s``; which track a merge keeps and what it inherits; when a report inside a track's
+gate is another UAV (``birth_sep_m``); and the ground hold before an update without height."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,6 +15,7 @@ from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.kalman import CvFilter
 from uav_fusion.core.estimators.multi import MultiTracker, UavTrack
 from uav_fusion.core.profiles.settings import MultiSettings
+from uav_fusion.core.records import RadarTrack
 from uav_fusion.core.site import load_site
 
 T0 = 100.0
@@ -115,3 +120,93 @@ def test_a_horizontal_update_keeps_the_track_above_the_ground_beyond_below_groun
         mt._hold_height(tr)
         x, _ = tr.filter.mean()
         assert x[2] == pytest.approx(want)
+
+
+@pytest.mark.parametrize(("age", "merged"), [(3.0, False), (3.0 + 1e-6, True)])
+def test_side_by_side_holds_whichever_track_has_the_older_radar_update(
+    age: float, merged: bool
+) -> None:
+    """The side-by-side rule above with the roles swapped: the older track's last radar
+    update is the one at the edge of ``merge_s``."""
+    mt, older, younger = _pair(3.0)
+    t = T0 + 3.0
+    older.followed, younger.followed = 11, 12
+    older.last_radar_t = t - age
+    younger.last_radar_t = t
+    mt._merge(T0)
+    mt._merge(t)
+    assert (len(mt.tracks) == 1) is merged
+
+
+@pytest.mark.parametrize(("age", "inherited"), [(2.99, True), (3.01, False)])
+def test_the_kept_track_inherits_the_emitter_of_a_track_updated_within_merge_s(
+    age: float, inherited: bool
+) -> None:
+    """A merge keeps the older track, which takes the emitter of the one it drops only when
+    that one was updated within ``merge_s``: a coasting track that drifted onto another UAV
+    does not pass its emitter on."""
+    mt, older, younger = _pair(3.0)
+    t = T0 + 3.0
+    younger.emitter = "2437.0 MHz"
+    mt._merge(T0)
+    older.last_update_t = t
+    younger.last_update_t = t - age
+    mt._merge(t)
+    assert mt.tracks == [older]
+    assert (older.emitter == "2437.0 MHz") is inherited
+
+
+@pytest.mark.parametrize(("age", "kept"), [(2.99, "younger"), (3.01, "older")])
+def test_a_track_updated_within_merge_s_is_kept_over_one_that_is_not(
+    age: float, kept: str
+) -> None:
+    """The older track has coasted for 10 s; the younger one was updated ``age`` ago. Within
+    ``merge_s`` the live younger track is kept; beyond it neither is live and the older one
+    is kept, as in any merge."""
+    mt, older, younger = _pair(3.0)
+    t = T0 + 3.0
+    mt._merge(T0)
+    older.last_update_t = t - 10.0
+    younger.last_update_t = t - age
+    mt._merge(t)
+    assert mt.tracks == [younger if kept == "younger" else older]
+
+
+@pytest.mark.parametrize(("age", "merged"), [(3.0, False), (3.0 + 1e-6, True)])
+def test_heights_are_compared_only_while_both_tracks_have_a_recent_radar_update(
+    age: float, merged: bool
+) -> None:
+    """Two tracks on one radar object, at one horizontal place but 100 m apart in height:
+    while both have a radar update at most ``merge_s`` old their heights count (3 dof) and
+    they are apart; once one is older than that it has no height worth comparing (2 dof) and
+    they merge."""
+    mt, older, younger = _pair(3.0)
+    younger.filter.set_state(
+        [0.0, 500.0, 160.0, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
+    )
+    older.followed = younger.followed = 11
+    mt._merge(T0)  # no radar update yet: compared horizontally, close from now on
+    t = T0 + 3.0
+    older.last_radar_t = t
+    younger.last_radar_t = t - age
+    mt._merge(t)
+    assert (len(mt.tracks) == 1) is merged
+
+
+def test_a_report_inside_a_tracks_gate_is_another_uav_only_beyond_birth_sep_m() -> None:
+    """Track 0 took report 0 of the frame; report 1, inside its gate, is another UAV (it may
+    start its own track) only when it lies more than ``birth_sep_m`` away horizontally; one
+    UAV split into two radar tracks gives reports closer than that. Without a report taken,
+    nothing is apart."""
+    mt = MultiTracker(load_profile("tracker"), load_site())
+    sep = mt.settings.birth_sep_m
+    assert sep == 60.0
+
+    def cand(e: float) -> Any:
+        trk = RadarTrack(T0, 1, 0.0, 0.0, 0.0, e, 500.0, 60.0, None, 0.8, None, -10.0)
+        return (trk, None, 1.0, None, (e, 500.0, 60.0))
+
+    for d, apart in ((0.99 * sep, False), (1.01 * sep, True)):
+        cands = [cand(0.0), cand(d)]
+        assert mt._apart(0, 1, {0: 0}, cands) is apart
+        assert mt._apart(0, 1, {}, cands) is False
