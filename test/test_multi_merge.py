@@ -2,7 +2,8 @@
 that stay close (``multi.merge_nis``) are one UAV only once they have been close for
 ``merge_s``, and not while each has been updated by a different radar object within
 ``merge_s``; which track a merge keeps and what it inherits; when a report inside a track's
-gate is another UAV (``birth_sep_m``); and the ground hold before an update without height."""
+gate is another UAV (``birth_sep_m``); the ground hold before an update without height; and
+when an emitter leaves its track (``emitter_misses``)."""
 
 from __future__ import annotations
 
@@ -210,3 +211,26 @@ def test_a_report_inside_a_tracks_gate_is_another_uav_only_beyond_birth_sep_m() 
         cands = [cand(0.0), cand(d)]
         assert mt._apart(0, 1, {0: 0}, cands) is apart
         assert mt._apart(0, 1, {}, cands) is False
+
+
+def test_an_emitter_leaves_its_track_at_the_nth_fix_in_a_row_outside_the_gate() -> None:
+    """``emitter_misses`` at its edge: a confirmed track carrying an emitter keeps it through
+    ``emitter_misses - 1`` fixes of that emitter in a row outside its gate and loses it at the
+    next; a fix inside the gate starts the count again."""
+    mt = MultiTracker(load_profile("tracker"), load_site())
+    n = mt.settings.emitter_misses
+    assert n == 3
+    tr = _track(1, T0 - 20.0, 0.0)
+    tr.emitter = "2437.0 MHz"
+    mt.tracks = [tr]
+    r = (100.0, 0.0, 100.0)
+    far, near = (900.0, 500.0), (0.0, 500.0)
+    for _ in range(n - 1):
+        mt.emitters.update(tr, T0, far, r)
+    assert tr.emitter == "2437.0 MHz"
+    mt.emitters.update(tr, T0, near, r)  # inside: the run ends
+    for _ in range(n - 1):
+        mt.emitters.update(tr, T0, far, r)
+    assert tr.emitter == "2437.0 MHz"
+    mt.emitters.update(tr, T0, far, r)
+    assert tr.emitter is None and mt.counters["emitter_unlinked"] == 1

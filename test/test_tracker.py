@@ -19,7 +19,7 @@ from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.gates import PhysicalGates
 from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
 from uav_fusion.core.estimators.offline import run_tracker
-from uav_fusion.core.estimators.parts import FixedRadarR, RadarAlignment
+from uav_fusion.core.estimators.parts import FixedRadarR, PolarRadarR, RadarAlignment
 from uav_fusion.core.estimators.steps import Step, TrackerStep
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.profiles.settings import ScoreConfig
@@ -1354,3 +1354,32 @@ def test_an_object_outside_the_gate_makes_a_rejection_from_its_nth_report(
     assert len(mine) > 40 and all(x.t >= 102.0 for x in mine)
     first = next(k for k, x in enumerate(mine) if x.coasted)
     assert first == n - 1
+
+
+@pytest.mark.parametrize("adaptive", [True, False])
+def test_an_objects_own_filter_takes_a_report_with_the_object_floor(
+    site: Site, adaptive: bool
+) -> None:
+    """A radar object's own filter starts from its first report with the report's polar R
+    plus ``object_floor_m`` squared on each axis (the radar's polar R 150 m out is a few
+    metres; an object's reports scatter more than that), with the online allowance or with a
+    fixed track floor above it."""
+    prof = load_profile("tracker")
+    if not adaptive:
+        prof = dataclasses.replace(prof, radar_floor_m=40.0, adaptive_window=None)
+    tr = Tracker(prof, site)
+    f = tr.cfg.object_floor_m
+    assert f == 10.0
+    r0 = np.array(site.radar.enu, dtype=float)
+    e, n, u = map(float, r0 + np.array([150.0, 0.0, 20.0]))
+    feed(tr, RadarFrame(50.0, (RadarTrack(50.0, 3, 0.0, 0.0, 0.0, e, n, u, (0.0, 0.0, 0.0), 0.5,
+                                          None, -10.0),)))  # fmt: skip
+    kf = tr.objects.objects[3].kf
+    assert kf is not None
+    p = tr.profile
+    polar = PolarRadarR(
+        site.radar.enu, p.radar_sigma_range_m, math.radians(p.radar_sigma_az_deg),
+        math.radians(p.radar_sigma_el_deg),
+    ).r_at(e, n, u)  # fmt: skip
+    assert kf.P[0] == pytest.approx(polar[0] + f * f)
+    assert kf.P[6] == pytest.approx(polar[3] + f * f)
