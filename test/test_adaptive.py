@@ -18,9 +18,11 @@ from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import load_profile, run_flight
 from uav_fusion.core.estimators.adaptive import (
     CEP_PER_SIGMA,
+    HELD_S,
     AdaptiveRadarR,
     AdaptiveRfR,
     NoiseChannel,
+    observe_rf_fix,
 )
 from uav_fusion.core.estimators.kalman import CvFilter
 from uav_fusion.core.estimators.parts import CepRfR, PolarRadarR
@@ -232,3 +234,18 @@ def test_tracker_with_adaptive_noise_runs_a_flight_and_reports_its_sigmas(
     sig_az = _number(status["radar_sigma_az_deg"])
     assert prof.radar_sigma_az_deg <= sig_az <= 2.0 * prof.radar_sigma_az_deg
     assert sum(1 for s in res.steps if s.counted) > 1000
+
+
+@pytest.mark.parametrize(("age", "to_radar"), [(HELD_S, True), (HELD_S + 0.01, False)])
+def test_a_fix_checks_the_radar_only_while_the_radar_holds_the_track(
+    age: float, to_radar: bool
+) -> None:
+    """``HELD_S`` at its edge: an RF fix with a 3D radar update at most that old checks the
+    radar's allowance for correlated errors; one later is a sample of the RF noise instead."""
+    spec = PolarRadarR(RADAR, 2.0, math.radians(2.0), math.radians(2.0))
+    radar = AdaptiveRadarR(spec, window=200, bound=2.0, gate_m=1000.0)
+    rf = AdaptiveRfR(CepRfR(scale=1.0, floor_m=0.0, fallback=(100.0, 0.0, 100.0)), 300, 3.0)
+    f = CvFilter((0.05, 0.05, 0.05))
+    f.set_state([0.0, 1000.0, 60.0, 0.0, 0.0, 0.0], np.diag([400.0, 400.0, 100.0, 9.0, 9.0, 1.0]))
+    observe_rf_fix(radar, rf, 0.0, age, f, (5.0, 1003.0), 1.2, 10.0)
+    assert (radar.checks, rf.scale.n) == ((1, 0) if to_radar else (0, 1))

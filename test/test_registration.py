@@ -12,7 +12,12 @@ from test_tracker import Scene
 from uav_fusion.core.estimators import load_profile
 from uav_fusion.core.estimators.offline import run_tracker
 from uav_fusion.core.estimators.parts import RadarAlignment
-from uav_fusion.core.estimators.registration import GATE_SIGMAS, MIN_RANGE_M, Registration
+from uav_fusion.core.estimators.registration import (
+    GATE_SIGMAS,
+    HUBER_K,
+    MIN_RANGE_M,
+    Registration,
+)
 from uav_fusion.core.estimators.tracker import Tracker
 from uav_fusion.core.records import RadarFrame, RfAttempt
 from uav_fusion.core.site import RadarCalibration, Site, load_site
@@ -156,3 +161,21 @@ def test_with_correlated_errors_the_bound_holds_the_truth_where_the_sigma_does_n
         in_sigma += err <= 2.0 * reg.sigma_deg
         in_bound += err <= 2.0 * reg.bound_deg
     assert in_bound >= 34 and in_sigma <= 30  # 2 sigmas: 95 % if honest
+
+
+def test_a_measurement_beyond_huber_k_sigmas_is_down_weighted() -> None:
+    """Huber's weight at its edge: a measurement just inside ``HUBER_K`` sigmas of the
+    estimate moves it by the plain Kalman gain; one just beyond moves it by the gain of a
+    variance inflated by ``a / HUBER_K`` (``a`` its distance in sigmas)."""
+    cal = RadarCalibration(0.0, 0.0, 0.2)
+    rho = 800.0
+    meas_var = math.degrees(1.0) ** 2 * 26.0 / rho**2  # fix 25 m^2 + object 1 m^2 per axis
+    s = math.sqrt(meas_var + 0.2**2)
+    rx = rho * math.sin(math.radians(45.0))
+    for k, inflated in ((HUBER_K - 0.01, False), (HUBER_K + 0.01, True)):
+        reg = Registration((0.0, 0.0, 10.0), cal)
+        o = math.radians(45.0 + k * s)
+        assert reg.pair((rho * math.sin(o), rho * math.cos(o)), (rx, rx), 25.0, 1.0)
+        var = meas_var * (k / HUBER_K if inflated else 1.0)
+        want = 0.2**2 / (var + 0.2**2) * k * s
+        assert reg.az_deg == pytest.approx(want, rel=1e-6)
