@@ -25,8 +25,8 @@ Per radar frame (one time for all reports):
    rejection;
 4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
    ``init_min_reports`` reports), old enough (the score's ``stationary_min_age_s``, or its
-   ``class_tau_s`` while it moves at ``stationary_speed_mps`` or more, or with RF support)
-   and outside every track's gate
+   ``class_tau_s`` while it moves at ``stationary_speed_mps`` or more, or with an RF fix
+   credited to it within ``rf_tau_s``) and outside every track's gate
    starts a confirmed track from its object's state (at the RF start's height prior when it
    has no usable height; never from a ghost below the ground);
 5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
