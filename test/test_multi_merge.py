@@ -22,10 +22,15 @@ from uav_fusion.core.site import load_site
 T0 = 100.0
 
 
+def _place(tr: UavTrack, e: float, up: float = 60.0) -> None:
+    """Put ``tr`` at ``e`` east, 500 m north, ``up`` high, flying east at 5 m/s (position
+    variances 25, 25 and 100 m^2)."""
+    tr.filter.set_state([e, 500.0, up, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0]))
+
+
 def _track(track_id: int, born: float, e: float) -> UavTrack:
-    f = CvFilter((1.0, 1.0, 1.0))
-    f.set_state([e, 500.0, 60.0, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0]))
-    tr = UavTrack(track_id, born, f, confirmed=True)
+    tr = UavTrack(track_id, born, CvFilter((1.0, 1.0, 1.0)), confirmed=True)
+    _place(tr, e)
     tr.last_update_t = T0
     return tr
 
@@ -52,13 +57,9 @@ def test_close_tracks_merge_once_close_for_merge_s_and_not_before(merge_s: float
 def test_tracks_that_part_start_their_merge_clock_again() -> None:
     mt, older, younger = _pair(3.0)
     mt._merge(T0)
-    younger.filter.set_state(
-        [300.0, 500.0, 60.0, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
-    )
+    _place(younger, 300.0)
     mt._merge(T0 + 2.0)  # apart: the clock stops
-    younger.filter.set_state(
-        [3.0, 500.0, 60.0, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
-    )
+    _place(younger, 3.0)
     mt._merge(T0 + 2.5)  # close again: the clock restarts here
     mt._merge(T0 + 5.0)
     assert len(mt.tracks) == 2
@@ -97,9 +98,7 @@ def test_tracks_merge_only_inside_merge_nis(scale: float, merged: bool) -> None:
     just over it they never do."""
     mt, older, younger = _pair(3.0)
     d = scale * float(np.sqrt(50.0 * mt.settings.merge_nis))
-    younger.filter.set_state(
-        [d, 500.0, 60.0, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
-    )
+    _place(younger, d)
     for k in range(5):
         mt._merge(T0 + k)
     assert (mt.tracks == [older]) is merged
@@ -115,9 +114,7 @@ def test_a_horizontal_update_keeps_the_track_above_the_ground_beyond_below_groun
     assert lim == 5.0
     for depth, want in ((1.01 * lim, -0.2 * 1.01 * lim), (0.99 * lim, -0.99 * lim)):
         tr = _track(1, T0, 0.0)
-        tr.filter.set_state(
-            [0.0, 500.0, -depth, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
-        )
+        _place(tr, 0.0, -depth)
         mt._hold_height(tr)
         x, _ = tr.filter.mean()
         assert x[2] == pytest.approx(want)
@@ -182,9 +179,7 @@ def test_heights_are_compared_only_while_both_tracks_have_a_recent_radar_update(
     they are apart; once one is older than that it has no height worth comparing (2 dof) and
     they merge."""
     mt, older, younger = _pair(3.0)
-    younger.filter.set_state(
-        [0.0, 500.0, 160.0, 5.0, 0.0, 0.0], np.diag([25.0, 25.0, 100.0, 4.0, 4.0, 1.0])
-    )
+    _place(younger, 0.0, 160.0)
     older.followed = younger.followed = 11
     mt._merge(T0)  # no radar update yet: compared horizontally, close from now on
     t = T0 + 3.0
