@@ -141,21 +141,34 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert "2 flights cached, 0 to generate" not in text
     assert "0 flights cached, 2 to generate" in text
     table = text[text.index("pooled over 2 test flights") :]
-    assert "\npaper " in table and "\npaper_q8 " in table
+    assert "\npaper " in table and "\npaper_q8 " in table and "\nradar " in table
+    # each profile against the radar's own track, on the epochs both cover
+    assert "  paper: mean error at most the radar's own track's on " in text
+    assert "  paper_q8: mean error at most the radar's own track's on " in text
     assert "commit:" in text and "dask 2026.8.0" in text and "wall time" in text
     with (out / "per_flight.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert sorted((r["profile"], r["flight"]) for r in rows) == [
         ("paper", "zigzag_dash-s4"), ("paper", "zigzag_dash-s5"),
         ("paper_q8", "zigzag_dash-s4"), ("paper_q8", "zigzag_dash-s5"),
+        ("radar", "zigzag_dash-s4"), ("radar", "zigzag_dash-s5"),
     ]
+    radar_row = next(r for r in rows if r["profile"] == "radar")
+    assert radar_row["anees"] == "" and radar_row["registration_az_deg"] == ""
     assert (out / "bench_accuracy.png").stat().st_size > 10_000
     summary = json.loads((out / "summary.json").read_text())
     assert summary["provenance"]["split"] == "test"
-    assert set(summary["pooled"]) == {"paper", "paper_q8"}
+    assert set(summary["pooled"]) == {"paper", "paper_q8", "radar"}
+    assert summary["pooled"]["radar"]["anees"] is None  # the radar's track has no covariance
     md = (out / "table.md").read_text().splitlines()
-    assert md[2].startswith("| paper |") and md[3].startswith("| paper_q8 |") and md[4] == ""
-    assert [x.split(" | ")[1] for x in md[7:]] == ["zigzag_dash-s4", "zigzag_dash-s5"] * 2
+    assert md[2].startswith("| paper |") and md[3].startswith("| paper_q8 |")
+    assert md[4].startswith("| radar |") and md[5] == ""
+    assert [x.split(" | ")[1] for x in md[8:14]] == ["zigzag_dash-s4", "zigzag_dash-s5"] * 3
+    assert md[14] == "" and md[15].startswith("| profile | flight | epochs both cover |")
+    assert [x.split(" | ")[:2] for x in md[17:]] == [
+        ["| paper", "zigzag_dash-s4"], ["| paper", "zigzag_dash-s5"],
+        ["| paper_q8", "zigzag_dash-s4"], ["| paper_q8", "zigzag_dash-s5"],
+    ]
     # the command's figures are the task's, computed here directly
     d = load_definition(definition)
     cf = cached_flights(d, "test", cache, SITE_FILE)[0]
@@ -186,7 +199,8 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert "old" not in new and new.endswith(f"{end}\nafter\n")
     assert "`uav_fusion bench --definition tiny --profiles paper " in new and md[2] in new
     results = json.loads((tmp_path / "bench" / "results" / "tiny-test.json").read_text())
-    assert results["kind"] == "accuracy" and set(results["profiles"]) == {"paper", "paper_q8"}
+    assert results["kind"] == "accuracy"
+    assert set(results["profiles"]) == {"paper", "paper_q8", "radar"}
     assert "commit" not in json.dumps(results) and "seconds" not in results["profiles"]["paper"]
     # a README without the run's markers is refused before anything runs
     readme.write_text("# x\n")
@@ -198,6 +212,21 @@ def test_bench_command_rejects_duplicate_profile_names(tmp_path: Path) -> None:
     argv = ["bench", "--definition", str(definition), "--profiles", "paper", "paper",
             "--out", str(tmp_path / "o"), "--cache", str(tmp_path / "c")]
     assert main(argv) == 2
+
+
+def test_bench_command_refuses_a_profile_named_like_the_baseline(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The radar's own track is the row ``radar``: a profile of that name would share it."""
+    definition = write_def(tmp_path, tiny())
+    prof = tmp_path / "radar.yaml"
+    prof.write_text("extends: paper\nname: radar\n", encoding="utf-8")
+    argv = ["bench", "--definition", str(definition), "--profiles", str(prof),
+            "--out", str(tmp_path / "o"), "--cache", str(tmp_path / "c")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{prof}: the profile name 'radar' is the benchmark's baseline" in err
+    assert not (tmp_path / "c").exists()  # refused before any flight was generated
 
 
 def test_tasks_and_results_pickle_for_worker_processes(tmp_path: Path) -> None:
@@ -231,7 +260,8 @@ def test_bench_runs_on_an_existing_scheduler(
     text = capsys.readouterr().out
     assert f"Dask scheduler {cluster.scheduler_address} (1 workers)" in text
     with (tmp_path / "o" / "per_flight.csv").open() as fh:
-        assert [r["flight"] for r in csv.DictReader(fh)] == ["zigzag_dash-s4"]
+        rows = [(r["profile"], r["flight"]) for r in csv.DictReader(fh)]
+    assert rows == [("paper", "zigzag_dash-s4"), ("radar", "zigzag_dash-s4")]
 
 
 def test_registration_is_judged_against_the_true_mount_within_the_tolerance_or_the_bound() -> None:

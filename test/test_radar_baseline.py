@@ -1,5 +1,5 @@
-"""The multi-UAV benchmark's baseline, the radar's own tracks passed through
-(core/bench/radar_baseline.py), and its comparison with a profile."""
+"""The benchmarks' baseline, the radar's own tracks passed through
+(core/bench/radar_baseline.py), and its comparison with a profile: multi-UAV and single-UAV."""
 
 from __future__ import annotations
 
@@ -10,8 +10,17 @@ import numpy as np
 import pytest
 
 from uav_fusion.core.bench.multi import MultiFlightResult
-from uav_fusion.core.bench.radar_baseline import NAME, against_radar, radar_epochs
+from uav_fusion.core.bench.radar_baseline import (
+    NAME,
+    against_radar,
+    against_radar_single,
+    radar_epochs,
+    radar_grid,
+)
+from uav_fusion.core.bench.single import FlightResult
 from uav_fusion.core.records import Flight, RadarFrame, RadarTrack
+from uav_fusion.core.scoring.fixed_rate import GridSamples, nees
+from uav_fusion.core.scoring.fixed_rate import pool as pool_grid
 from uav_fusion.core.scoring.outcomes import FlightSamples, UavSamples
 from uav_fusion.core.site import RadarCalibration, load_site
 
@@ -106,3 +115,77 @@ def test_the_comparison_counts_flights_and_uavs_on_the_epochs_both_cover() -> No
         "tracker: GOSPA below the radar's on 1 of 2 flights; mean error at most the radar's "
         "on 2 of 3 UAVs (epochs both cover)"
     )
+
+
+# --- the single-UAV baseline ---------------------------------------------------------------
+
+
+def test_the_single_uav_baseline_publishes_the_most_uav_like_report() -> None:
+    """At each epoch the report with the highest class of at least 0.5 (the lower track id on
+    a tie), moved to the epoch; its age; a new "track" whenever the chosen id changes, a gap
+    included; no covariance."""
+    frames = [
+        RadarFrame(10.0, (_report(10.0, 1, 0.6, 0.0), _report(10.0, 2, 0.8, 50.0))),
+        RadarFrame(11.0, (_report(11.0, 2, 0.7, 52.0), _report(11.0, 1, 0.7, 3.0))),
+        RadarFrame(12.0, (_report(12.0, 2, 0.49, 54.0),)),  # below 0.5: nothing
+        RadarFrame(13.0, (_report(13.0, 1, 0.5, 9.0, None),)),  # exactly 0.5 passes
+    ]
+    g = radar_grid(_flight(frames), load_site(), 2.0, 10.0, 13.5)
+    assert g.t.tolist() == [10.0 + 0.5 * k for k in range(8)]
+    assert g.track_id.tolist() == [2, 2, 1, 1, -1, -1, 1, 1]
+    assert g.published.tolist() == [True, True, True, True, False, False, True, True]
+    assert g.x[1, 0] == pytest.approx(50.0 + 4.0 * 0.5)  # moved 0.5 s at 4 m/s east
+    assert g.x[2, 0] == 3.0  # the tie of 0.7 goes to track 1
+    assert g.x[7, 0] == 9.0  # no velocity reported: held
+    assert g.age_s[1] == pytest.approx(0.5) and math.isnan(g.age_s[4])
+    assert set(g.last_source[g.published]) == {"radar"}
+    assert g.confirmed_tracks == 3 and g.restarts == 2  # 2, then 1, then 1 again after a gap
+    assert np.all(np.isnan(g.P))
+
+
+def _grid_result(profile: str, flight: str, errors: list[float | None]) -> FlightResult:
+    idx = np.array([k for k, e in enumerate(errors) if e is not None], dtype=np.int64)
+    errs = np.array([e for e in errors if e is not None], dtype=float)
+    z = np.zeros(idx.size)
+    samples = GridSamples(
+        len(errors), idx.size, idx.size, errs, z, z, z, np.zeros(idx.size, bool), -1, 0, 0,
+        0.0, 0, epoch_index=idx,
+    )  # fmt: skip
+    return FlightResult(flight, "plan", 1, "test", profile, samples, 0, 0.0)
+
+
+def test_a_profile_is_compared_with_the_radar_on_the_epochs_both_cover() -> None:
+    """f1: ours 10 / 50 / - against the radar's - / 40 / 5: on the one epoch both cover ours
+    is higher. f2: 20 against 20, equal counts as at most. f3: the radar covers nothing."""
+    results = [
+        _grid_result("tracker", "f1", [10.0, 50.0, None]),
+        _grid_result(NAME, "f1", [None, 40.0, 5.0]),
+        _grid_result("tracker", "f2", [20.0, 20.0]),
+        _grid_result(NAME, "f2", [20.0, 20.0]),
+        _grid_result("tracker", "f3", [1.0]),
+        _grid_result(NAME, "f3", [None]),
+    ]
+    rows, lines = against_radar_single(results)
+    assert rows[2:] == [
+        "| tracker | f1 | 1 | 50.0 | 40.0 |",
+        "| tracker | f2 | 2 | 20.0 | 20.0 |",
+        "| tracker | f3 | 0 | - | - |",
+    ]
+    assert lines == [
+        "tracker: mean error at most the radar's own track's on 1 of 2 flights (epochs both "
+        "cover); pooled over 3 epochs 30.0 m against 26.7 m; above it: f1 50.0 (40.0)"
+    ]
+
+
+def test_an_output_without_a_covariance_has_no_nees() -> None:
+    """The baseline's NaN covariance gives NaN NEES per epoch, and the pool leaves it out."""
+    err = np.array([[3.0, 0.0, 0.0], [0.0, 4.0, 0.0]])
+    P = np.stack([np.eye(3) * 9.0, np.full((3, 3), math.nan)])
+    ne = nees(err, P)
+    assert ne[0] == pytest.approx(1.0) and math.isnan(ne[1])
+    a = _grid_result("x", "f", [1.0, 2.0])
+    with_nees = replace(a.samples, nees=np.array([1.0, math.nan]))
+    score = pool_grid([with_nees])
+    assert score.anees == 1.0 and score.nees_in95_pct == 100.0
+    none = pool_grid([replace(a.samples, nees=np.array([math.nan, math.nan]))])
+    assert math.isnan(none.anees) and math.isnan(none.nees_in95_pct)

@@ -309,6 +309,7 @@ def test_worlds_bench_and_sweep_end_to_end(
         rows = list(csv.DictReader(fh))
     assert sorted((r["profile"], r["family"]) for r in rows) == [
         ("paper", "false_uav_clutter"), ("paper", "narrow_fov"),
+        ("radar", "false_uav_clutter"), ("radar", "narrow_fov"),
         ("tracker", "false_uav_clutter"), ("tracker", "narrow_fov"),
     ]  # fmt: skip
     assert all(float(r["longest_gross_s"]) >= 0 for r in rows)
@@ -321,15 +322,16 @@ def test_worlds_bench_and_sweep_end_to_end(
         true = world["radar_mount"]["az_bias_deg"]
         assert float(r["registration_az_true_deg"]) == pytest.approx(true, abs=1e-3)
         assert float(r["registration_az_bound_deg"]) >= float(r["registration_az_sigma_deg"])
-    assert all(r["registration_az_true_deg"] == "" for r in rows if r["profile"] == "paper")
+    assert all(r["registration_az_true_deg"] == "" for r in rows if r["profile"] != "tracker")
     assert "tracker: azimuth within 0.1 deg of the true mount, or within the flight's bound" in text
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["families"]) == {"narrow_fov", "false_uav_clutter", "all"}
     results = json.loads((tmp_path / "bench" / "results" / "tinyworlds-test.json").read_text())
     assert results["kind"] == "worlds" and results["episode_error_m"] == 300.0
-    assert set(results["families"]["all"]) == {"paper", "tracker"}
+    assert set(results["families"]["all"]) == {"paper", "tracker", "radar"}
     new = readme.read_text()
     assert "old" not in new and "| all 2 families | tracker |" in new
+    assert "| false_uav_clutter | radar |" in new  # the radar's own track, per family
     assert "`uav_fusion bench --definition tinyworlds --profiles paper tracker`" in new
     # a sweep on the tune half, one family
     spec = spec_from_dict(

@@ -1,8 +1,10 @@
 """``uav_fusion bench``: the accuracy benchmark (docs/benchmark.md).
 
 Generates the definition's flights into the cache (once), runs every listed profile over every
-flight of the split in parallel on a Dask cluster, scores each run's fixed-rate output, prints
-one table (a row per profile, the pooled figures) with provenance, and writes the per-flight
+flight of the split in parallel on a Dask cluster, scores each run's fixed-rate output beside
+the radar's own track passed through (the row ``radar``, :mod:`uav_fusion.core.bench.
+radar_baseline`), prints one table (a row per profile, the pooled figures) with provenance
+and each profile against the radar on the epochs both cover, and writes the per-flight
 CSV, the figure, the table in Markdown and a JSON summary. A multi-UAV definition
 (``targets: multi``, e.g. ``--definition multi``) runs the multi-UAV tracker instead and
 scores every flight's tracks as a set (:mod:`uav_fusion.core.bench.multi`). With
@@ -21,6 +23,8 @@ from typing import Any, TypeVar
 
 from uav_fusion.core.bench.cache import CachedFlight, cached_flights
 from uav_fusion.core.bench.definition import SPLITS, BenchDefinition, load_definition
+from uav_fusion.core.bench.radar_baseline import NAME as RADAR_BASELINE
+from uav_fusion.core.bench.radar_baseline import against_radar_single
 from uav_fusion.core.bench.report import (
     CSV_FILE,
     FIGURE_FILE,
@@ -122,6 +126,12 @@ def run(args: argparse.Namespace) -> int:
                 f"{profile_path(arg)}: profile name {p.name!r} is used by two of the listed "
                 "profiles (the table's rows are named by it)"
             )
+    for p in profiles:
+        if p.name == RADAR_BASELINE:
+            raise ConfigError(
+                f"{p.source}: the profile name {RADAR_BASELINE!r} is the benchmark's baseline "
+                "(the radar's own tracks); rename the profile"
+            )
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
     site_file = Path(args.site) if args.site else config_path(DEFAULT_SITE)
@@ -145,14 +155,15 @@ def run(args: argparse.Namespace) -> int:
     )
     if definition.multi:
         return _run_multi(args, definition, profiles, site, flights, missing, out, wall0)
+    # the profiles, then the radar's own track passed through (radar_baseline.py)
     tasks = [
-        ScoreTask(f, p, site, definition.grid_hz, definition.settings)
-        for p in profiles
+        ScoreTask(f, p, site, definition.grid_hz, definition.settings, baseline=base)
+        for p, base in [*((p, False) for p in profiles), (profiles[0], True)]
         for f in flights
     ]
     results, runs = _generate_and_run(
         args, definition, site, missing, score_task, tasks,
-        lambda t: f"{t.profile.name} on {t.flight.flight_id}",
+        lambda t: f"{RADAR_BASELINE if t.baseline else t.profile.name} on {t.flight.flight_id}",
     )  # fmt: skip
     settings = definition.settings
     scores = pooled(results, settings)
@@ -171,6 +182,12 @@ def run(args: argparse.Namespace) -> int:
             f"longest: the longest run of epochs more than {settings.episode_error_m:g} m off):"
         )
         print(text_families(by_family, settings.episode_error_m))
+    radar_rows, radar_lines = against_radar_single(results)
+    print()
+    print("against the radar's own track (its most UAV-like report, class >= 0.5, passed "
+          "through):")
+    for line in radar_lines:
+        print(f"  {line}")
     reg_lines = registration_lines(results)
     if reg_lines:
         print()
@@ -189,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
     )  # fmt: skip
     table_path.write_text(
         markdown_table(scores) + "\n\n" + family_md + markdown_flights(results, settings)
-        + "\n",
+        + "\n\n" + "\n".join(radar_rows) + "\n",
         encoding="utf-8",
     )  # fmt: skip
     print(f"per-flight figures: {csv_path}")
@@ -328,15 +345,9 @@ def _run_multi(
         write_multi_csv,
         write_multi_figure,
     )
-    from uav_fusion.core.bench.radar_baseline import NAME as RADAR_BASELINE
     from uav_fusion.core.bench.radar_baseline import against_radar
 
     for p in profiles:
-        if p.name == RADAR_BASELINE:
-            raise ConfigError(
-                f"{p.source}: the profile name {RADAR_BASELINE!r} is the multi-UAV benchmark's "
-                "baseline (the radar's own tracks); rename the profile"
-            )
         if not p.uses_tracker:
             raise ConfigError(
                 f"{p.source}: the multi-UAV benchmark needs a tracker profile (estimator: "

@@ -1,53 +1,59 @@
-"""The radar's own tracks passed through: the baseline a multi-UAV tracker has to beat.
+"""The radar's own tracks passed through: the baseline a tracker has to beat.
 
 A radar with an onboard tracker already outputs tracks with a class. A user who takes them
-as they come, keeping the ones the classifier calls a UAV, has a multi-UAV tracker for free;
-fusion earns its keep only where it does better. At each epoch of the benchmark's grid the
-baseline publishes every report of the latest radar frame at or before the epoch (if that
-frame is at most :data:`~uav_fusion.core.estimators.adaptive.HELD_S` old, the radar's longest
+as they come, keeping the ones the classifier calls a UAV, has a tracker for free; fusion
+earns its keep only where it does better. At each epoch of the benchmark's grid the
+baseline takes the reports of the latest radar frame at or before the epoch (if that frame
+is at most :data:`~uav_fusion.core.estimators.adaptive.HELD_S` old, the radar's longest
 update interval) whose own class probability is at least ``min_uav_prob`` (0.5, the paper's
-raw radar row), under the radar's track id, moved to the epoch with its reported velocity.
-The site file's mount calibration corrects the positions, as it does for the trackers.
+raw radar row), each moved to the epoch with its reported velocity. The site file's mount
+calibration corrects the positions, as it does for the trackers.
 
-The multi-UAV benchmark scores it as the profile ``radar``, beside the profiles it runs.
+* **Multi-UAV** (:func:`radar_epochs`): every such report is a track, under the radar's
+  track id. The multi-UAV benchmark scores it as the profile ``radar``.
+* **Single-UAV** (:func:`radar_grid`): the one report the classifier finds most UAV-like
+  (the highest class probability; the lower track id on a tie) is the UAV, published with
+  no covariance (no NEES). The single-UAV benchmark scores it as the profile ``radar`` on
+  the profiles' grid, and :func:`against_radar_single` compares each profile with it on the
+  epochs both cover.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from uav_fusion.core.data.uav_class import DEFAULT_MIN_MEAN_UAV_PROB
 from uav_fusion.core.estimators.adaptive import HELD_S
 from uav_fusion.core.estimators.parts import alignment_from_site
-from uav_fusion.core.records import Flight
+from uav_fusion.core.records import RADAR, Flight, RadarTrack
+from uav_fusion.core.scoring.fixed_rate import Grid
 from uav_fusion.core.scoring.gospa import EpochTracks, PublishedTrack, pool
 from uav_fusion.core.scoring.outcomes import UavSamples
 from uav_fusion.core.site import Site
 
 if TYPE_CHECKING:
     from uav_fusion.core.bench.multi import MultiFlightResult
+    from uav_fusion.core.bench.single import FlightResult
 
 #: the baseline's name where the benchmark lists profiles
 NAME = "radar"
 
+FloatArray = npt.NDArray[np.float64]
 
-def radar_epochs(
-    flight: Flight,
-    site: Site,
-    grid_hz: float,
-    t0: float,
-    t1: float,
-    min_uav_prob: float = DEFAULT_MIN_MEAN_UAV_PROB,
-) -> list[EpochTracks]:
-    """The baseline's tracks at every epoch ``k / grid_hz`` in ``[t0, t1]`` (see the module
-    text)."""
+
+def _epoch_reports(
+    flight: Flight, site: Site, grid_hz: float, t0: float, t1: float, min_uav_prob: float
+) -> Iterator[tuple[float, list[tuple[RadarTrack, FloatArray]]]]:
+    """Every epoch ``k / grid_hz`` in ``[t0, t1]`` with the reports the baseline passes on
+    then (module text): each report with its corrected state ``(e, n, u, ve, vn, vu)`` moved
+    to the epoch."""
     frames = sorted(flight.radar, key=lambda fr: fr.t)
     align = alignment_from_site(site)
-    out: list[EpochTracks] = []
     j = -1
     k = math.ceil(t0 * grid_hz)
     while k / grid_hz < t0:
@@ -55,7 +61,7 @@ def radar_epochs(
     while (t := k / grid_hz) <= t1:
         while j + 1 < len(frames) and frames[j + 1].t <= t:
             j += 1
-        tracks: list[PublishedTrack] = []
+        reports: list[tuple[RadarTrack, FloatArray]] = []
         if j >= 0 and t - frames[j].t <= HELD_S:
             for trk in frames[j].tracks:
                 p = trk.uav_prob
@@ -69,10 +75,75 @@ def radar_epochs(
                 dt = t - trk.t
                 x = np.array([e + ve * dt, n + vn * dt, u + vu * dt, ve, vn, vu], dtype=float)
                 if np.all(np.isfinite(x)):
-                    tracks.append(PublishedTrack(trk.track_id, x))
-        out.append(EpochTracks(t, tuple(tracks)))
+                    reports.append((trk, x))
+        yield t, reports
         k += 1
-    return out
+
+
+def radar_epochs(
+    flight: Flight,
+    site: Site,
+    grid_hz: float,
+    t0: float,
+    t1: float,
+    min_uav_prob: float = DEFAULT_MIN_MEAN_UAV_PROB,
+) -> list[EpochTracks]:
+    """The multi-UAV baseline's tracks at every epoch ``k / grid_hz`` in ``[t0, t1]`` (see
+    the module text)."""
+    return [
+        EpochTracks(t, tuple(PublishedTrack(trk.track_id, x) for trk, x in reports))
+        for t, reports in _epoch_reports(flight, site, grid_hz, t0, t1, min_uav_prob)
+    ]
+
+
+def radar_grid(
+    flight: Flight,
+    site: Site,
+    grid_hz: float,
+    t0: float,
+    t1: float,
+    min_uav_prob: float = DEFAULT_MIN_MEAN_UAV_PROB,
+) -> Grid:
+    """The single-UAV baseline's output on the grid ``k / grid_hz`` in ``[t0, t1]`` (see the
+    module text): the most UAV-like report, its age, its radar track id; a new "track"
+    whenever that id changes (so ``restarts`` counts the hand-overs between radar tracks)."""
+    ts: list[float] = []
+    xs: list[FloatArray] = []
+    ages: list[float] = []
+    ids: list[int] = []
+    runs = 0
+    last = -1
+    nan6 = np.full(6, math.nan)
+    for t, reports in _epoch_reports(flight, site, grid_hz, t0, t1, min_uav_prob):
+        ts.append(t)
+        if not reports:
+            xs.append(nan6)
+            ages.append(math.nan)
+            ids.append(-1)
+            last = -1
+            continue
+        trk, x = max(reports, key=lambda r: (r[0].uav_prob or 0.0, -r[0].track_id))
+        if trk.track_id != last:
+            runs += 1
+        last = trk.track_id
+        xs.append(x)
+        ages.append(t - trk.t)
+        ids.append(trk.track_id)
+    n = len(ts)
+    has = np.array([i >= 0 for i in ids], dtype=bool)
+    return Grid(
+        frequency_hz=grid_hz,
+        max_coast_s=HELD_S,
+        t=np.array(ts, dtype=float),
+        x=np.array(xs, dtype=float).reshape(n, 6),
+        P=np.full((n, 6, 6), math.nan),
+        has_track=has,
+        published=has.copy(),
+        age_s=np.array(ages, dtype=float),
+        track_id=np.array(ids, dtype=np.int64),
+        last_source=np.array([RADAR if h else "" for h in has], dtype=np.str_),
+        confirmed_tracks=runs,
+    )
 
 
 def _common_mean(a: UavSamples, b: UavSamples) -> tuple[int, float, float]:
@@ -125,3 +196,55 @@ def against_radar(results: Sequence[MultiFlightResult]) -> str:
             f"the radar's on {ok} of {uavs} UAVs (epochs both cover)"
         )
     return "\n".join(rows)
+
+
+def _common_errors(a: FlightResult, b: FlightResult) -> tuple[FloatArray, FloatArray]:
+    """The errors of two single-UAV runs of one flight on the epochs both cover."""
+    ia, ib = a.samples.epoch_index, b.samples.epoch_index
+    _, ka, kb = np.intersect1d(ia, ib, assume_unique=True, return_indices=True)
+    return a.samples.errors[ka], b.samples.errors[kb]
+
+
+def against_radar_single(results: Sequence[FlightResult]) -> tuple[list[str], list[str]]:
+    """Each single-UAV profile against the baseline on the epochs both cover: the Markdown
+    rows of a per-flight table (profile, flight, epochs, mean error and the radar's), and a
+    summary line per profile (flights with a mean at most the radar's, the pooled means, and
+    the flights above it)."""
+    radar = {r.flight_id: r for r in results if r.profile == NAME}
+    rows = [
+        "| profile | flight | epochs both cover | mean m | radar's mean m |",
+        "|---|---|---:|---:|---:|",
+    ]
+    per: dict[str, list[tuple[str, int, float, float]]] = {}
+    pooled: dict[str, tuple[list[FloatArray], list[FloatArray]]] = {}
+    for r in results:
+        base = radar.get(r.flight_id)
+        if r.profile == NAME or base is None:
+            continue
+        mine, theirs = _common_errors(r, base)
+        n = int(mine.size)
+        m = float(mine.mean()) if n else math.nan
+        o = float(theirs.mean()) if n else math.nan
+        per.setdefault(r.profile, []).append((r.flight_id, n, m, o))
+        pa, pb = pooled.setdefault(r.profile, ([], []))
+        pa.append(mine)
+        pb.append(theirs)
+        cells = f"{m:.1f} | {o:.1f}" if n else "- | -"
+        rows.append(f"| {r.profile} | {r.flight_id} | {n} | {cells} |")
+    lines = []
+    for prof, flights in per.items():
+        scored = [f for f in flights if f[1] > 0]
+        ok = sum(1 for f in scored if f[2] <= f[3])
+        a = np.concatenate(pooled[prof][0])
+        b = np.concatenate(pooled[prof][1])
+        line = (
+            f"{prof}: mean error at most the radar's own track's on {ok} of {len(scored)} "
+            f"flights (epochs both cover)"
+        )
+        if a.size:
+            line += f"; pooled over {a.size} epochs {a.mean():.1f} m against {b.mean():.1f} m"
+        worse = [f"{f[0]} {f[2]:.1f} ({f[3]:.1f})" for f in scored if f[2] > f[3]]
+        if worse:
+            line += "; above it: " + ", ".join(worse)
+        lines.append(line)
+    return rows, lines

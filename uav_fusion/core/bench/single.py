@@ -12,6 +12,8 @@ from pathlib import Path
 
 from uav_fusion.core.bench.cache import CachedFlight, generate_flight, read_labels
 from uav_fusion.core.bench.definition import BenchDefinition
+from uav_fusion.core.bench.radar_baseline import NAME as RADAR_BASELINE
+from uav_fusion.core.bench.radar_baseline import radar_grid
 from uav_fusion.core.data import load_flight
 from uav_fusion.core.errors import DataError
 from uav_fusion.core.estimators.consider import published_cov
@@ -43,6 +45,8 @@ class ScoreTask:
     site: Site
     grid_hz: float
     settings: ScoreSettings
+    #: score the radar's own track passed through instead of the profile (radar_baseline.py)
+    baseline: bool = False
 
 
 @dataclass(frozen=True)
@@ -90,15 +94,29 @@ def generate_task(task: GenerateTask) -> bool:
 
 
 def score_task(task: ScoreTask) -> FlightResult:
-    """Run the profile over the cached flight and score its fixed-rate output."""
+    """Run the profile over the cached flight and score its fixed-rate output (with
+    ``task.baseline``: the radar's own track instead, on the same grid)."""
     t0 = time.perf_counter()
     cf = task.flight
     flight = load_flight(cf.folder, task.site)
     truth = FlightTruth.from_flight(flight, task.site)
-    result = run_flight(flight, task.profile, task.site)
     t_start, t_end = truth.span
     if not t_end > t_start:
         raise DataError(cf.folder, None, "the flight has fewer than two truth samples")
+    if task.baseline:
+        grid = radar_grid(flight, task.site, task.grid_hz, t_start, t_end)
+        return FlightResult(
+            flight_id=cf.flight_id,
+            plan=cf.flight.plan.name,
+            seed=cf.flight.seed,
+            split=cf.flight.split,
+            profile=RADAR_BASELINE,
+            samples=score_grid(grid, truth, read_labels(cf.folder), task.settings),
+            steps=0,
+            seconds=time.perf_counter() - t0,
+            family=cf.flight.family,
+        )
+    result = run_flight(flight, task.profile, task.site)
     cons = published_cov(task.profile, task.site)
     grid = grid_from_steps(
         result.steps, task.profile, task.grid_hz, t_start, t_end, consider=cons

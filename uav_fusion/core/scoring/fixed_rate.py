@@ -23,7 +23,9 @@ Per flight, and pooled over flights (:func:`pool`):
   the time the tracker takes to find the UAV, against the ones it loses later);
 * NEES ``e^T P^-1 e`` of the published position covariance (``P``'s position block) on the
   covered epochs: ANEES (its mean; 3 for an honest covariance) and the share inside the
-  two-sided ``nees_probability`` (95 %) chi-square(3) bounds (95 % for an honest one);
+  two-sided ``nees_probability`` (95 %) chi-square(3) bounds (95 % for an honest one); an
+  output without a covariance (the radar's own track, :mod:`~uav_fusion.core.bench.
+  radar_baseline`) has neither;
 * ``ttf_s``: time from the first airborne epoch to the first airborne epoch with a confirmed
   track (0 when one existed already; NaN when none ever did);
 * ``restarts``: confirmed tracks of the run after the first one (the published track was
@@ -42,7 +44,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -268,6 +270,8 @@ class GridSamples:
     restarts: int
     observable_startup: int = 0  # radar-observable epochs before the first tracked one
     longest_gross_s: float = 0.0  # the longest gross episode (s)
+    #: the grid index of each covered epoch (two runs on one grid compare epoch by epoch)
+    epoch_index: npt.NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 @dataclass(frozen=True)
@@ -312,11 +316,15 @@ def _pct(num: int, den: int) -> float:
 
 
 def nees(err: FloatArray, P_pos: FloatArray) -> FloatArray:
-    """``e^T P^-1 e`` per row: ``err`` (N, 3), ``P_pos`` (N, 3, 3)."""
-    if err.shape[0] == 0:
-        return np.zeros(0)
-    sol = np.linalg.solve(P_pos, err[:, :, None])[:, :, 0]
-    return np.asarray(np.einsum("ij,ij->i", err, sol), dtype=float)
+    """``e^T P^-1 e`` per row: ``err`` (N, 3), ``P_pos`` (N, 3, 3); NaN for a row whose
+    covariance is not finite (an output that has none)."""
+    out = np.full(err.shape[0], math.nan)
+    ok = np.all(np.isfinite(P_pos), axis=(1, 2))
+    if not ok.any():
+        return out
+    sol = np.linalg.solve(P_pos[ok], err[ok][:, :, None])[:, :, 0]
+    out[ok] = np.einsum("ij,ij->i", err[ok], sol)
+    return out
 
 
 @dataclass(frozen=True)
@@ -421,6 +429,7 @@ def score_grid(
         restarts=grid.restarts,
         observable_startup=n_start,
         longest_gross_s=longest_run(over) / grid.frequency_hz,
+        epoch_index=np.flatnonzero(cov).astype(np.int64),
     )
 
 
@@ -440,6 +449,7 @@ def pool(samples: Sequence[GridSamples], settings: ScoreSettings | None = None) 
     fresh = sum(x.fresh for x in samples)
     err = np.concatenate([x.errors for x in samples]) if samples else np.zeros(0)
     ne = np.concatenate([x.nees for x in samples]) if samples else np.zeros(0)
+    ne = ne[np.isfinite(ne)]  # an output without a covariance has no NEES
     labelled = [x for x in samples if x.observable >= 0]
     n_obs = sum(x.observable for x in labelled)
     n_obs_cov = sum(x.observable_covered for x in labelled)
