@@ -160,6 +160,11 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert summary["provenance"]["split"] == "test"
     assert set(summary["pooled"]) == {"paper", "paper_q8", "radar"}
     assert summary["pooled"]["radar"]["anees"] is None  # the radar's track has no covariance
+    vs = summary["against_radar"]
+    assert set(vs) == {"paper", "paper_q8"}
+    per = vs["paper"]["per_flight"]
+    assert set(per) == {"zigzag_dash-s4", "zigzag_dash-s5"}
+    assert vs["paper"]["flights"] == sum(f["epochs"] > 0 for f in per.values()) >= 1
     md = (out / "table.md").read_text().splitlines()
     assert md[2].startswith("| paper |") and md[3].startswith("| paper_q8 |")
     assert md[4].startswith("| radar |") and md[5] == ""

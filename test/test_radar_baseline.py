@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -14,6 +15,7 @@ from uav_fusion.core.bench.radar_baseline import (
     NAME,
     against_radar,
     against_radar_single,
+    markdown_against_radar,
     radar_epochs,
     radar_grid,
 )
@@ -165,16 +167,25 @@ def test_a_profile_is_compared_with_the_radar_on_the_epochs_both_cover() -> None
         _grid_result("tracker", "f3", [1.0]),
         _grid_result(NAME, "f3", [None]),
     ]
-    rows, lines = against_radar_single(results)
-    assert rows[2:] == [
+    (c,) = against_radar_single(results)
+    assert (c.profile, c.flights, c.at_most, c.epochs) == ("tracker", 2, 1, 3)
+    assert c.mean_m == pytest.approx(30.0) and c.radar_mean_m == pytest.approx(80.0 / 3)
+    assert [f.flight_id for f in c.above] == ["f1"]
+    assert markdown_against_radar([c]).splitlines()[2:] == [
         "| tracker | f1 | 1 | 50.0 | 40.0 |",
         "| tracker | f2 | 2 | 20.0 | 20.0 |",
         "| tracker | f3 | 0 | - | - |",
     ]
-    assert lines == [
+    assert c.line() == (
         "tracker: mean error at most the radar's own track's on 1 of 2 flights (epochs both "
         "cover); pooled over 3 epochs 30.0 m against 26.7 m; above it: f1 50.0 (40.0)"
-    ]
+    )
+    doc = c.as_dict()
+    assert (doc["flights"], doc["at_most"], doc["epochs"]) == (2, 1, 3)
+    per = doc["per_flight"]
+    assert isinstance(per, dict)
+    assert per["f3"] == {"epochs": 0, "mean_m": None, "radar_mean_m": None}
+    json.dumps(doc, allow_nan=False)  # the summary JSON holds no NaN
 
 
 def test_an_output_without_a_covariance_has_no_nees() -> None:

@@ -24,7 +24,7 @@ from typing import Any, TypeVar
 from uav_fusion.core.bench.cache import CachedFlight, cached_flights
 from uav_fusion.core.bench.definition import SPLITS, BenchDefinition, load_definition
 from uav_fusion.core.bench.radar_baseline import NAME as RADAR_BASELINE
-from uav_fusion.core.bench.radar_baseline import against_radar_single
+from uav_fusion.core.bench.radar_baseline import against_radar_single, markdown_against_radar
 from uav_fusion.core.bench.report import (
     CSV_FILE,
     FIGURE_FILE,
@@ -182,12 +182,12 @@ def run(args: argparse.Namespace) -> int:
             f"longest: the longest run of epochs more than {settings.episode_error_m:g} m off):"
         )
         print(text_families(by_family, settings.episode_error_m))
-    radar_rows, radar_lines = against_radar_single(results)
+    vs_radar = against_radar_single(results)
     print()
     print("against the radar's own track (its most UAV-like report, class >= 0.5, passed "
           "through):")
-    for line in radar_lines:
-        print(f"  {line}")
+    for c in vs_radar:
+        print(f"  {c.line()}")
     reg_lines = registration_lines(results)
     if reg_lines:
         print()
@@ -206,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
     )  # fmt: skip
     table_path.write_text(
         markdown_table(scores) + "\n\n" + family_md + markdown_flights(results, settings)
-        + "\n\n" + "\n".join(radar_rows) + "\n",
+        + "\n\n" + markdown_against_radar(vs_radar) + "\n",
         encoding="utf-8",
     )  # fmt: skip
     print(f"per-flight figures: {csv_path}")
@@ -214,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"figure: {write_figure(results, settings, out / FIGURE_FILE)}")
     timing = f"{time.perf_counter() - wall0:.1f} s ({runs})"
     prov["wall_time"] = timing
-    json_path = write_summary_json(scores, prov, out / JSON_FILE, by_family)
+    json_path = write_summary_json(scores, prov, out / JSON_FILE, by_family, vs_radar)
     print(f"table (Markdown): {table_path}; summary: {json_path}")
     if args.readme:
         figures = {p: sc.as_dict() for p, sc in scores.items()}

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -205,17 +206,83 @@ def _common_errors(a: FlightResult, b: FlightResult) -> tuple[FloatArray, FloatA
     return a.samples.errors[ka], b.samples.errors[kb]
 
 
-def against_radar_single(results: Sequence[FlightResult]) -> tuple[list[str], list[str]]:
-    """Each single-UAV profile against the baseline on the epochs both cover: the Markdown
-    rows of a per-flight table (profile, flight, epochs, mean error and the radar's), and a
-    summary line per profile (flights with a mean at most the radar's, the pooled means, and
-    the flights above it)."""
+@dataclass(frozen=True)
+class FlightComparison:
+    """One single-UAV run against the baseline on the epochs both cover."""
+
+    flight_id: str
+    epochs: int
+    mean_m: float  # NaN without a common epoch
+    radar_mean_m: float
+
+
+@dataclass(frozen=True)
+class RadarComparison:
+    """A single-UAV profile against the baseline, per flight and pooled over the epochs both
+    cover (``flights`` with a common epoch; ``at_most``: those with a mean error at most the
+    radar's)."""
+
+    profile: str
+    per_flight: tuple[FlightComparison, ...]
+    epochs: int
+    mean_m: float
+    radar_mean_m: float
+
+    @property
+    def flights(self) -> int:
+        return sum(1 for f in self.per_flight if f.epochs > 0)
+
+    @property
+    def above(self) -> tuple[FlightComparison, ...]:
+        """The flights where the profile's mean error is above the radar's."""
+        return tuple(f for f in self.per_flight if f.epochs > 0 and f.mean_m > f.radar_mean_m)
+
+    @property
+    def at_most(self) -> int:
+        return self.flights - len(self.above)
+
+    def as_dict(self) -> dict[str, object]:
+        """For the summary JSON (no NaN: a flight without a common epoch has nulls)."""
+
+        def num(v: float) -> float | None:
+            return round(v, 3) if math.isfinite(v) else None
+
+        return {
+            "flights": self.flights,
+            "at_most": self.at_most,
+            "epochs": self.epochs,
+            "mean_m": num(self.mean_m),
+            "radar_mean_m": num(self.radar_mean_m),
+            "per_flight": {
+                f.flight_id: {
+                    "epochs": f.epochs, "mean_m": num(f.mean_m), "radar_mean_m": num(f.radar_mean_m)
+                }
+                for f in self.per_flight
+            },
+        }  # fmt: skip
+
+    def line(self) -> str:
+        """The summary line the command prints."""
+        out = (
+            f"{self.profile}: mean error at most the radar's own track's on {self.at_most} of "
+            f"{self.flights} flights (epochs both cover)"
+        )
+        if self.epochs:
+            out += (
+                f"; pooled over {self.epochs} epochs {self.mean_m:.1f} m against "
+                f"{self.radar_mean_m:.1f} m"
+            )
+        if self.above:
+            cells = (f"{f.flight_id} {f.mean_m:.1f} ({f.radar_mean_m:.1f})" for f in self.above)
+            out += "; above it: " + ", ".join(cells)
+        return out
+
+
+def against_radar_single(results: Sequence[FlightResult]) -> list[RadarComparison]:
+    """Each single-UAV profile against the baseline on the epochs both cover, in the order
+    the profiles first appear."""
     radar = {r.flight_id: r for r in results if r.profile == NAME}
-    rows = [
-        "| profile | flight | epochs both cover | mean m | radar's mean m |",
-        "|---|---|---:|---:|---:|",
-    ]
-    per: dict[str, list[tuple[str, int, float, float]]] = {}
+    per: dict[str, list[FlightComparison]] = {}
     pooled: dict[str, tuple[list[FloatArray], list[FloatArray]]] = {}
     for r in results:
         base = radar.get(r.flight_id)
@@ -223,28 +290,42 @@ def against_radar_single(results: Sequence[FlightResult]) -> tuple[list[str], li
             continue
         mine, theirs = _common_errors(r, base)
         n = int(mine.size)
-        m = float(mine.mean()) if n else math.nan
-        o = float(theirs.mean()) if n else math.nan
-        per.setdefault(r.profile, []).append((r.flight_id, n, m, o))
+        per.setdefault(r.profile, []).append(
+            FlightComparison(
+                r.flight_id,
+                n,
+                float(mine.mean()) if n else math.nan,
+                float(theirs.mean()) if n else math.nan,
+            )
+        )
         pa, pb = pooled.setdefault(r.profile, ([], []))
         pa.append(mine)
         pb.append(theirs)
-        cells = f"{m:.1f} | {o:.1f}" if n else "- | -"
-        rows.append(f"| {r.profile} | {r.flight_id} | {n} | {cells} |")
-    lines = []
+    out = []
     for prof, flights in per.items():
-        scored = [f for f in flights if f[1] > 0]
-        ok = sum(1 for f in scored if f[2] <= f[3])
         a = np.concatenate(pooled[prof][0])
         b = np.concatenate(pooled[prof][1])
-        line = (
-            f"{prof}: mean error at most the radar's own track's on {ok} of {len(scored)} "
-            f"flights (epochs both cover)"
+        out.append(
+            RadarComparison(
+                prof,
+                tuple(flights),
+                int(a.size),
+                float(a.mean()) if a.size else math.nan,
+                float(b.mean()) if b.size else math.nan,
+            )
         )
-        if a.size:
-            line += f"; pooled over {a.size} epochs {a.mean():.1f} m against {b.mean():.1f} m"
-        worse = [f"{f[0]} {f[2]:.1f} ({f[3]:.1f})" for f in scored if f[2] > f[3]]
-        if worse:
-            line += "; above it: " + ", ".join(worse)
-        lines.append(line)
-    return rows, lines
+    return out
+
+
+def markdown_against_radar(comparisons: Sequence[RadarComparison]) -> str:
+    """The per-flight comparison as a Markdown table (profile, flight, epochs both cover,
+    mean error and the radar's)."""
+    rows = [
+        "| profile | flight | epochs both cover | mean m | radar's mean m |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for c in comparisons:
+        for f in c.per_flight:
+            cells = f"{f.mean_m:.1f} | {f.radar_mean_m:.1f}" if f.epochs else "- | -"
+            rows.append(f"| {c.profile} | {f.flight_id} | {f.epochs} | {cells} |")
+    return "\n".join(rows)

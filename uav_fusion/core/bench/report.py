@@ -17,6 +17,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from uav_fusion.core.bench.radar_baseline import RadarComparison
 from uav_fusion.core.bench.single import FlightResult, RegistrationOutcome
 from uav_fusion.core.scoring.fixed_rate import (
     TABLE_COLUMNS,
@@ -302,6 +303,7 @@ def write_summary_json(
     prov: Mapping[str, Any],
     path: Path,
     families: Mapping[str, Mapping[str, GridScore]] | None = None,
+    against_radar: Sequence[RadarComparison] = (),
 ) -> Path:
     def clean(d: dict[str, Any]) -> dict[str, Any]:
         return {
@@ -317,6 +319,8 @@ def write_summary_json(
         doc["families"] = {
             fam: {p: clean(s.as_dict()) for p, s in by.items()} for fam, by in families.items()
         }
+    if against_radar:
+        doc["against_radar"] = {c.profile: c.as_dict() for c in against_radar}
     path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return path
 
