@@ -156,6 +156,7 @@ def test_bench_command_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[
     radar_row = next(r for r in rows if r["profile"] == "radar")
     assert radar_row["anees"] == "" and radar_row["registration_az_deg"] == ""
     assert (out / "bench_accuracy.png").stat().st_size > 10_000
+    assert (out / "bench_vs_radar.png").stat().st_size > 10_000
     summary = json.loads((out / "summary.json").read_text())
     assert summary["provenance"]["split"] == "test"
     assert set(summary["pooled"]) == {"paper", "paper_q8", "radar"}

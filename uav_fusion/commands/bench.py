@@ -29,6 +29,7 @@ from uav_fusion.core.bench.report import (
     CSV_FILE,
     FIGURE_FILE,
     JSON_FILE,
+    RADAR_FIGURE_FILE,
     TABLE_FILE,
     markdown_families,
     markdown_flights,
@@ -42,6 +43,7 @@ from uav_fusion.core.bench.report import (
     text_table,
     write_csv,
     write_figure,
+    write_radar_figure,
     write_summary_json,
 )
 from uav_fusion.core.bench.results import (
@@ -212,6 +214,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"per-flight figures: {csv_path}")
     if not args.no_figure:
         print(f"figure: {write_figure(results, settings, out / FIGURE_FILE)}")
+        print(f"figure: {write_radar_figure(vs_radar, out / RADAR_FIGURE_FILE)}")
     timing = f"{time.perf_counter() - wall0:.1f} s ({runs})"
     prov["wall_time"] = timing
     json_path = write_summary_json(scores, prov, out / JSON_FILE, by_family, vs_radar)

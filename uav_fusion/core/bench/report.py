@@ -31,6 +31,7 @@ from uav_fusion.resources import share_dir
 FIGURE_DPI = 110
 CSV_FILE = "per_flight.csv"
 FIGURE_FILE = "bench_accuracy.png"
+RADAR_FIGURE_FILE = "bench_vs_radar.png"
 TABLE_FILE = "table.md"
 JSON_FILE = "summary.json"
 VERSION_PACKAGES = ("uav_fusion", "numpy", "scipy", "dask", "distributed")
@@ -368,6 +369,45 @@ def write_figure(
         if profiles:  # outside the axes: the bars reach the top
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     ax_cov.set_ylim(0, 100)
+    fig.tight_layout()
+    fig.savefig(path, format="png", dpi=FIGURE_DPI)
+    return path
+
+
+def write_radar_figure(comparisons: Sequence[RadarComparison], path: Path) -> Path:
+    """Each flight's mean error of each profile against the radar's own track's, on the epochs
+    both cover (log axes): below the diagonal the profile does better; the flights above it
+    are labelled."""
+    fig = Figure(figsize=(7.5, 7.0), dpi=FIGURE_DPI)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    lo, hi = math.inf, 0.0
+    for c in comparisons:
+        pts = [f for f in c.per_flight if f.epochs > 0]
+        if not pts:
+            continue
+        x = np.array([f.radar_mean_m for f in pts])
+        y = np.array([f.mean_m for f in pts])
+        lo, hi = min(lo, float(x.min()), float(y.min())), max(hi, float(x.max()), float(y.max()))
+        label = f"{c.profile}: at most the radar on {c.at_most} of {c.flights}"
+        ax.scatter(x, y, s=22, label=label)
+        for f in c.above:
+            ax.annotate(f.flight_id, (f.radar_mean_m, f.mean_m), fontsize=6,
+                        xytext=(3, 3), textcoords="offset points")  # fmt: skip
+    if hi > 0:
+        lo = max(lo / 1.5, 1e-1)
+        hi = hi * 1.5
+        ax.plot([lo, hi], [lo, hi], color="grey", lw=0.8, ls="--")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.legend(loc="upper left", fontsize=8)
+    ax.set_title("one point per flight: below the diagonal, better than the radar's own track",
+                 fontsize=9)  # fmt: skip
+    ax.set_xlabel("the radar's own track: mean 3D error per flight (m, epochs both cover)")
+    ax.set_ylabel("profile: mean 3D error per flight (m, the same epochs)")
+    ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=FIGURE_DPI)
     return path
