@@ -103,36 +103,29 @@ def score_task(task: ScoreTask) -> FlightResult:
     t_start, t_end = truth.span
     if not t_end > t_start:
         raise DataError(cf.folder, None, "the flight has fewer than two truth samples")
+    reg: RegistrationOutcome | None = None
     if task.baseline:
+        name, steps = RADAR_BASELINE, 0
         grid = radar_grid(flight, task.site, task.grid_hz, t_start, t_end)
-        return FlightResult(
-            flight_id=cf.flight_id,
-            plan=cf.flight.plan.name,
-            seed=cf.flight.seed,
-            split=cf.flight.split,
-            profile=RADAR_BASELINE,
-            samples=score_grid(grid, truth, read_labels(cf.folder), task.settings),
-            steps=0,
-            seconds=time.perf_counter() - t0,
-            family=cf.flight.family,
+    else:
+        result = run_flight(flight, task.profile, task.site)
+        name, steps = task.profile.name, len(result.steps)
+        cons = published_cov(task.profile, task.site)
+        grid = grid_from_steps(
+            result.steps, task.profile, task.grid_hz, t_start, t_end, consider=cons
         )
-    result = run_flight(flight, task.profile, task.site)
-    cons = published_cov(task.profile, task.site)
-    grid = grid_from_steps(
-        result.steps, task.profile, task.grid_hz, t_start, t_end, consider=cons
-    )
-    samples = score_grid(grid, truth, read_labels(cf.folder), task.settings)
+        reg = registration(result.status, true_mount_az(cf.folder))
     return FlightResult(
         flight_id=cf.flight_id,
         plan=cf.flight.plan.name,
         seed=cf.flight.seed,
         split=cf.flight.split,
-        profile=task.profile.name,
-        samples=samples,
-        steps=len(result.steps),
+        profile=name,
+        samples=score_grid(grid, truth, read_labels(cf.folder), task.settings),
+        steps=steps,
         seconds=time.perf_counter() - t0,
         family=cf.flight.family,
-        registration=registration(result.status, true_mount_az(cf.folder)),
+        registration=reg,
     )
 
 
