@@ -22,11 +22,14 @@ import os
 import random
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.resources import DEFAULT_FLIGHT, data_path
+
+T = TypeVar("T")
 
 HELP = "run the live node graph on the default flight and write the evaluation to out/demo/"
 MULTI_PLAN = "multi_crossing_pair"
@@ -248,8 +251,16 @@ def run(args: argparse.Namespace) -> int:
     return code
 
 
-def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: str) -> Any:
-    """One run of the live graph with ``profile``; its Evaluation, or None on failure."""
+def _replay(
+    args: argparse.Namespace,
+    ov: dict[str, Any],
+    banner: str,
+    collect: Callable[[Any], T],
+) -> tuple[Any, T, float] | None:
+    """Bring the live graph up with the overrides ``ov``, replay the flight and take down
+    the graph: the run's result, what ``collect`` took from the graph after the run, and
+    the flight's length (s); None when the run failed (said on stderr). ``banner`` opens
+    the line that says what is replayed."""
     import rclpy
     from rclpy.context import Context
     from rclpy.impl.logging_severity import LoggingSeverity
@@ -257,13 +268,6 @@ def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: s
 
     from uav_fusion.nodes.graph import Graph
 
-    ov = _overrides(args, flight_dir, out)
-    ov["fusion_node"]["profile"] = profile
-    ov["radar_replay"]["profile"] = profile
-    from uav_fusion.core.estimators import load_profile
-
-    if load_profile(profile).uses_tracker:  # score the fixed-rate output too
-        ov["evaluator_node"]["grid_topic"] = "fusion/odom"
     ctx = Context()
     rclpy.init(context=ctx, args=[])
     graph: Graph | None = None
@@ -273,7 +277,7 @@ def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: s
             for n in graph.nodes:
                 set_logger_level(n.get_logger().name, LoggingSeverity.WARN)
         print(
-            f"demo: profile {profile}: replaying {flight_dir} at "
+            f"demo: {banner}: replaying {ov['radar_replay']['flight_dir']} at "
             + ("full speed (rate 0)" if args.rate == 0 else f"{args.rate:g}x real time")
             + f", ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}",
             flush=True,
@@ -282,14 +286,34 @@ def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: s
         if not res.ok:
             print(f"demo: {res.message}", file=sys.stderr)
             return None
-        live = graph.evaluator.evaluate()
-        dropped = dict(graph.fusion.dropped)
-        grid = graph.fusion.output.grid_published
-        flight_s = graph.driver.t_end - graph.driver.t_start
+        return res, collect(graph), graph.driver.t_end - graph.driver.t_start
     finally:
         if graph is not None:
             graph.destroy()
         rclpy.shutdown(context=ctx)
+
+
+def _run_graph(args: argparse.Namespace, flight_dir: Path, out: Path, profile: str) -> Any:
+    """One run of the live graph with ``profile``; its Evaluation, or None on failure."""
+    from uav_fusion.core.estimators import load_profile
+
+    ov = _overrides(args, flight_dir, out)
+    ov["fusion_node"]["profile"] = profile
+    ov["radar_replay"]["profile"] = profile
+    if load_profile(profile).uses_tracker:  # score the fixed-rate output too
+        ov["evaluator_node"]["grid_topic"] = "fusion/odom"
+
+    def collect(graph: Any) -> tuple[Any, dict[str, int], int]:
+        return (
+            graph.evaluator.evaluate(),
+            dict(graph.fusion.dropped),
+            graph.fusion.output.grid_published,
+        )
+
+    ran = _replay(args, ov, f"profile {profile}", collect)
+    if ran is None:
+        return None
+    res, (live, dropped, grid), flight_s = ran
     extra = f", {grid} fixed-rate epochs on fusion/odom" if grid else ""
     print(
         f"demo: profile {profile}: {sum(res.published.values())} messages ({res.published}) "
@@ -337,15 +361,9 @@ def _multi_flight(args: argparse.Namespace, out: Path) -> Path:
 
 def _run_multi(args: argparse.Namespace, out: Path) -> int:
     """The multi-UAV graph on one flight, and its comparison with the offline run."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.impl.logging_severity import LoggingSeverity
-    from rclpy.logging import set_logger_level
-
     from uav_fusion.core.data import load_flight
     from uav_fusion.core.estimators import load_profile
     from uav_fusion.core.site import load_site
-    from uav_fusion.nodes.graph import Graph
 
     profile_name = args.profile if args.profile != "paper" else "tracker"
     profile = load_profile(profile_name)
@@ -370,34 +388,20 @@ def _run_multi(args: argparse.Namespace, out: Path) -> int:
             "vehicles": ",".join(vehicles),
         }
     )
-    ctx = Context()
-    rclpy.init(context=ctx, args=[])
-    graph: Graph | None = None
-    try:
-        graph = Graph(ctx, ov)
-        if args.quiet:
-            for n in graph.nodes:
-                set_logger_level(n.get_logger().name, LoggingSeverity.WARN)
-        print(
-            f"demo: multi-UAV graph, profile {profile_name}, {len(vehicles)} UAVs "
-            f"({', '.join(vehicles)}): replaying {flight_dir} at "
-            + ("full speed (rate 0)" if args.rate == 0 else f"{args.rate:g}x real time")
-            + f", ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']}",
-            flush=True,
-        )
-        res = graph.run(timeout_s=args.timeout)
-        if not res.ok:
-            print(f"demo: {res.message}", file=sys.stderr)
-            return 1
-        live = graph.evaluator.multi_score()
+
+    def collect(graph: Any) -> tuple[Any, list[Any], int]:
         with graph.evaluator._lock:
             received = sorted(graph.evaluator._tracks, key=lambda r: (r[0], r[1]))
-        published = graph.fusion.output.tracks_published
-        flight_s = graph.driver.t_end - graph.driver.t_start
-    finally:
-        if graph is not None:
-            graph.destroy()
-        rclpy.shutdown(context=ctx)
+        return graph.evaluator.multi_score(), received, graph.fusion.output.tracks_published
+
+    banner = (
+        f"multi-UAV graph, profile {profile_name}, {len(vehicles)} UAVs "
+        f"({', '.join(vehicles)})"
+    )
+    ran = _replay(args, ov, banner, collect)
+    if ran is None:
+        return 1
+    res, (live, received, published), flight_s = ran
     print(
         f"demo: {sum(res.published.values())} messages over {flight_s:.0f} s of flight in "
         f"{res.wall_s:.1f} s wall ({flight_s / res.wall_s:.0f}x real time); {published} track "
