@@ -90,6 +90,15 @@ def _imm(**changes: Any) -> dict[str, Any]:
             r"'association\.object\.skip_radar_coasts' is no longer a key: a radar coast",
         ),
         (
+            lambda d: d["association"].update(bird={"weight": 2.0}),
+            r"'association\.bird\.weight' is no longer a key: .*the radar classifier's",
+        ),
+        (
+            lambda d: d["association"].update(vehicle={"ground_alt_m": 5.0}),
+            r"'association\.vehicle\.ground_alt_m' is no longer a key: it is "
+            r"association\.ground\.alt_m",
+        ),
+        (
             lambda d: d["measurement"]["radar"].update(low_el_gain=2.0),
             r"'measurement\.radar\.low_el_gain' is no longer a key: .*specification",
         ),
@@ -1165,17 +1174,19 @@ def test_a_fix_too_coarse_for_an_update_may_still_support_the_object_it_fits(
 
 
 @pytest.mark.parametrize(
-    ("rcs_dbsm", "large_rcs", "vehicle"),
+    ("rcs_dbsm", "large_rcs", "large"),
     [
         (-12.0, 0.0, False),  # a small target moving low: a UAV far out or taking off
         (9.0, 0.0, True),  # a car-sized one
-        (None, 0.0, True),  # no RCS reported: counted as large, the term stays
+        (None, 0.0, False),  # no RCS reported: not judged by its size
         (-12.0, -20.0, True),  # a bound below its RCS: too large for a small UAV
     ],
 )
-def test_a_low_moving_object_is_a_ground_vehicle_only_if_it_is_large(
-    rcs_dbsm: float | None, large_rcs: float, vehicle: bool
+def test_a_low_moving_object_loses_score_only_for_a_cars_rcs(
+    rcs_dbsm: float | None, large_rcs: float, large: bool
 ) -> None:
+    """A low moving object is not judged by its height or speed (a UAV taking off or far out
+    flies so too); a car's RCS is what costs, through the size term."""
     cfg = dataclasses.replace(ScoreConfig(), large_rcs_dbsm=large_rcs)
     table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 20.0**2)))
     rng = np.random.default_rng(3)
@@ -1185,9 +1196,10 @@ def test_a_low_moving_object_is_a_ground_vehicle_only_if_it_is_large(
             RadarTrack(10.0 + 0.25 * k, 1, 0.0, 0.0, 0.0, 600.0 + 3.25 * k, 300.0, 1.0,
                        (0.0, 13.0, 0.0), 0.3, None, rcs)
         )  # fmt: skip
-    assert obj.up < cfg.ground_alt_m
-    no_ground = dataclasses.replace(cfg, ground_weight=0.0)
-    assert obj.score(cfg) == pytest.approx(obj.score(no_ground) - (3.0 if vehicle else 0.0))
+    assert obj.up < cfg.ground_alt_m and obj.speed > cfg.stationary_speed_mps
+    no_size = dataclasses.replace(cfg, large_rcs_weight=0.0)
+    lost = cfg.large_rcs_weight if large else 0.0
+    assert obj.score(cfg) == pytest.approx(obj.score(no_size) - lost)
 
 
 @pytest.mark.parametrize("tau_s", [5.0, 15.0])

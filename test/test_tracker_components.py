@@ -376,12 +376,12 @@ def test_a_track_starts_level_from_an_object_seen_climbing(flat: bool) -> None:
 
 # --- the UAV score's cues -------------------------------------------------------------------
 def _airborne_object(**fields: float) -> RadarObject:
-    """A radar object 20 s old, 60 m up, moving at 8 m/s with a small UAV's RCS and a calm
-    filter: none of the score's penalties applies; ``fields`` change that."""
+    """A radar object 20 s old, 60 m up, moving at 8 m/s with a small UAV's RCS: none of the
+    score's penalties applies; ``fields`` change that."""
     obj = RadarObject(7, 0.0)
     obj.last_t, obj.n_reports = 20.0, 80
     obj.up, obj.sd_up, obj.speed = 60.0, 3.0, 8.0
-    obj.rcs_mean, obj.rcs_seen, obj.nis_mean = -10.0, True, 1.0
+    obj.rcs_mean, obj.rcs_seen = -10.0, True
     for name, value in fields.items():
         setattr(obj, name, value)
     return obj
@@ -389,9 +389,9 @@ def _airborne_object(**fields: float) -> RadarObject:
 
 def test_the_uav_score_cues_at_their_edges() -> None:
     """Each penalty of the UAV score either side of its threshold: the score differs by
-    exactly that penalty's weight (the age term is full from 5 s on, so ages 7.9 and 8 s
-    score alike without the stationary cue)."""
-    cfg = ScoreConfig(class_tau_s=5.0)
+    exactly that penalty's weight; a low object that moves costs nothing of itself (the age
+    term is full from 5 s on, so ages 7.9 and 8 s score alike without the stationary cue)."""
+    cfg = ScoreConfig(class_tau_s=5.0, below_ground_sigmas=2.0)
     base = _airborne_object().score(cfg)
 
     def lost(**fields: float) -> float:
@@ -401,13 +401,15 @@ def test_the_uav_score_cues_at_their_edges() -> None:
     assert lost(speed=1.4, last_t=8.0) == pytest.approx(cfg.stationary_weight)
     assert lost(speed=1.4, last_t=7.9) == pytest.approx(0.0)
     assert lost(speed=1.6, last_t=8.0) == pytest.approx(0.0)
-    # a vehicle: moving below ground_alt_m (4 m) with a car's RCS (large_rcs_dbsm, 0 dBsm, and
-    # up, which also costs large_rcs_weight)
-    car = cfg.ground_weight + cfg.large_rcs_weight
-    assert lost(up=3.9, rcs_mean=0.0) == pytest.approx(car)
-    assert lost(up=4.1, rcs_mean=0.0) == pytest.approx(cfg.large_rcs_weight)
-    assert lost(up=3.9, rcs_mean=-0.1) == pytest.approx(0.0)
-    # a bird: a mean NIS above erratic_nis (6) with a mean RCS below bird_rcs_dbsm (-15 dBsm)
-    assert lost(nis_mean=6.1, rcs_mean=-15.1) == pytest.approx(cfg.erratic_weight)
-    assert lost(nis_mean=5.9, rcs_mean=-15.1) == pytest.approx(0.0)
-    assert lost(nis_mean=6.1, rcs_mean=-14.9) == pytest.approx(0.0)
+    # too large for a small UAV: a mean RCS of large_rcs_dbsm (0 dBsm) and up, when known
+    assert lost(rcs_mean=0.0) == pytest.approx(cfg.large_rcs_weight)
+    assert lost(rcs_mean=-0.1) == pytest.approx(0.0)
+    assert lost(rcs_mean=9.0, rcs_seen=False) == pytest.approx(0.0)
+    # a ghost: more than below_ground_m (5 m) and two vertical sigmas of its reports below
+    assert lost(up=-6.1, sd_up=3.0) == pytest.approx(cfg.below_ground_weight)
+    assert lost(up=-5.9, sd_up=3.0) == pytest.approx(0.0)
+    assert lost(up=-5.1, sd_up=1.0) == pytest.approx(cfg.below_ground_weight)
+    assert lost(up=-4.9, sd_up=1.0) == pytest.approx(0.0)
+    # low and moving: only a car's RCS costs (the size term), not the height
+    assert lost(up=1.0, speed=12.0) == pytest.approx(0.0)
+    assert lost(up=1.0, speed=12.0, rcs_mean=9.0) == pytest.approx(cfg.large_rcs_weight)

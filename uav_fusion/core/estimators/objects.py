@@ -14,15 +14,14 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   times the mean vertical standard deviation of its reports (from the radar's polar R: a few
   metres close in, tens of metres near the horizon far out, where a UAV's low pass scatters
   below the ground), is a multipath ghost (``-below_ground_weight``); one older than
-  ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is
-  clutter (``-stationary_weight``); one that moves but stays below ``ground_alt_m`` is a
-  ground vehicle (``-ground_weight``) if its mean RCS is too large for a small UAV (at least
-  ``large_rcs_dbsm``: a car is a large radar target; a small UAV taking off, or flying low
-  far out where its reports scatter around the ground, is not; an object without RCS
-  reports counts as large); one
-  whose own filter's mean NIS (3 dof, with the radar's polar R but a floor of
-  ``object_floor_m``) exceeds ``erratic_nis`` with a mean RCS below ``bird_rcs_dbsm`` is a
-  bird (``-erratic_weight``);
+  ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is clutter
+  (``-stationary_weight``: a mast, a tower or a roof edge stands still at any height; a
+  multirotor that hovers in front of the radar pays it too, but sits in the radar's Doppler
+  notch and is seldom reported then). A low object is not judged by its height or speed: a
+  car is a large radar target (below), and a parked one, like any object near the ground that
+  stands still, is the physical gates' concern (:mod:`~uav_fusion.core.estimators.gates`: it
+  never becomes the UAV without RF corroboration); a flock's erratic motion is the
+  classifier's to call;
 * size: an object whose mean RCS (moving average of its reports' dBsm) is at least
   ``large_rcs_dbsm`` is too large for a small UAV (``-large_rcs_weight``; a reflector, a
   car); one without RCS reports is not judged;
@@ -168,7 +167,6 @@ class RadarObject:
         "kf_t",
         "last_t",
         "n_reports",
-        "nis_mean",
         "rcs_mean",
         "rcs_seen",
         "rf_key",
@@ -192,7 +190,6 @@ class RadarObject:
         self.speed = 0.0
         self.up = 0.0
         self.sd_up = 0.0  # moving average of the reports' vertical standard deviation
-        self.nis_mean = 3.0
         self.rcs_mean = 0.0
         self.rcs_seen = False  # any report with a finite RCS
         self.rf_support = 0.0
@@ -235,14 +232,6 @@ class RadarObject:
             s -= cfg.below_ground_weight
         elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
             s -= cfg.stationary_weight
-        elif (
-            self.up < cfg.ground_alt_m
-            and self.n_reports > 1
-            and self.rcs_mean >= cfg.large_rcs_dbsm
-        ):
-            s -= cfg.ground_weight
-        if self.nis_mean > cfg.erratic_nis and self.rcs_mean < cfg.bird_rcs_dbsm:
-            s -= cfg.erratic_weight
         if self.rcs_seen and self.rcs_mean >= cfg.large_rcs_dbsm:
             s -= cfg.large_rcs_weight
         # min(rf_max, rf_support_at(last_t)) and min(1, age / class_tau_s) as conditionals
@@ -317,12 +306,9 @@ class ObjectTable:
             if not coast:
                 # a coast is the radar's own prediction: no new measurement for the filter
                 kf.predict(t - obj.kf_t)
-                nis = kf.update3(e, n, u, r)
+                kf.update3(e, n, u, r)
                 obj.kf_t = t
                 obj.drift.add(t, e, n)
-                if math.isfinite(nis):
-                    # min(nis, 100.0) as a conditional (no builtin call on the per-report path)
-                    obj.nis_mean = a * obj.nis_mean + (1.0 - a) * (100.0 if nis > 100.0 else nis)
         if vel is not None and math.isfinite(vel[0] + vel[1] + vel[2]):
             vn, ve, vd = vel
             spd = math.sqrt(vn * vn + ve * ve + vd * vd)

@@ -441,9 +441,10 @@ class RadarFront:
     """The trackers' shared first stage of a radar frame (see the module text).
 
     Every radar object's own filter sees the per-report error: its R uses the object floor
-    (``association.object.floor_m``) instead of the UAV track's ``floor_m``, since an
-    erratic-motion cue would vanish under a floor sized for correlated errors; a UAV track's
-    update adds the difference back on each diagonal element (:attr:`extra_var`).
+    (``association.object.floor_m``: close in, reports scatter more than the polar R, with
+    the onboard tracker's lag) instead of the UAV track's ``floor_m``, which allows for errors
+    correlated over seconds; a UAV track's update adds the difference back on each diagonal
+    element (:attr:`extra_var`).
     """
 
     def __init__(self, profile: Profile, site: Site, cfg: ScoreConfig) -> None:

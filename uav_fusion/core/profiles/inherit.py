@@ -82,6 +82,10 @@ def check_layout(doc: dict[Any, Any], where: str, section: str = "") -> None:
         if path in BY_PATH:
             continue
         if path not in SECTIONS:
+            if isinstance(v, dict):  # a section that has left the schema: name its key
+                for sub in v:
+                    if f"{path}.{sub}" in RETIRED:
+                        raise _unknown(f"{path}.{sub}", where)
             raise _unknown(path, where)
         if v is None:
             continue

@@ -89,9 +89,10 @@ SECTIONS: dict[str, str] = {
     "association": "the UAV score of every radar object, by cue (core/estimators/objects.py)",
     "association.class": "the radar classifier's output, read over time",
     "association.stationary": "clutter: an object that stands still",
-    "association.vehicle": "a ground vehicle: moving, low, never clearly in the air",
+    "association.ground": "near the ground: with association.stationary, the physical gates' "
+    "ground rule (a parked car, a mast or a reflector never becomes the UAV without RF "
+    "corroboration)",
     "association.ghost": "a multipath ghost: clearly below the ground",
-    "association.bird": "a bird: erratic motion with a small RCS",
     "association.size": "too large a radar target for a small UAV",
     "association.rf": "support from RF fixes at the object's position",
     "association.fused": "agreement with the fused track",
@@ -251,11 +252,11 @@ _ASSOCIATION = (
         _s("weight", "stationary_weight", NUMBER, DESIGN, "... loses this much",
            bounds=">= 0"),
     ),
-    *_group("association.vehicle", TRACKER,
-        _s("ground_alt_m", "ground_alt_m", NUMBER, PHYSICAL, "an object moving below this "
-           "height ...", unit="m", bounds=">= 0"),
-        _s("weight", "ground_weight", NUMBER, DESIGN, "... loses this much, when its mean RCS "
-           "is too large for a small UAV (association.size.large_rcs_dbsm)", bounds=">= 0"),
+    *_group("association.ground", TRACKER,
+        _s("alt_m", "ground_alt_m", NUMBER, PHYSICAL, "an object whose mean height lies below "
+           "this plus two of its reports' vertical sigmas is near the ground; the track is "
+           "airborne once a confirmed state stood higher by two of its own", unit="m",
+           bounds=">= 0"),
     ),
     *_group("association.ghost", TRACKER,
         _s("below_ground_m", "below_ground_m", NUMBER, PHYSICAL, "an object whose mean height "
@@ -264,13 +265,6 @@ _ASSOCIATION = (
            "its reports' vertical sigmas ...", bounds=">= 0", fit=TUNED),
         _s("weight", "below_ground_weight", NUMBER, DESIGN, "... loses this much",
            bounds=">= 0"),
-    ),
-    *_group("association.bird", TRACKER,
-        _s("erratic_nis", "erratic_nis", NUMBER, DESIGN, "an object whose own filter's mean "
-           "NIS exceeds this ...", bounds=">= 0"),
-        _s("max_rcs_dbsm", "bird_rcs_dbsm", NUMBER, PHYSICAL, "... with a mean RCS below this "
-           "...", unit="dBsm"),
-        _s("weight", "erratic_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
     ),
     *_group("association.size", TRACKER,
         _s("large_rcs_dbsm", "large_rcs_dbsm", NUMBER, PHYSICAL, "a mean RCS of at least this "
@@ -306,8 +300,9 @@ _ASSOCIATION = (
     *_group("association.object", TRACKER,
         _s("q", "object_q", NUMBER, DESIGN, "process noise of each object's CV filter",
            unit="m^2/s^3", bounds=">= 0"),
-        _s("floor_m", "object_floor_m", NUMBER, DESIGN, "its polar R's floor (the track's "
-           "floor would hide erratic motion)", unit="m", bounds=">= 0"),
+        _s("floor_m", "object_floor_m", NUMBER, DESIGN, "its polar R's floor (close in, an "
+           "object's reports scatter more than the polar R: the onboard tracker's lag)",
+           unit="m", bounds=">= 0"),
         _s("speed_tau_s", "speed_tau_s", NUMBER, DESIGN, "time constant of the objects' "
            "moving averages of speed, height and RCS", unit="s", bounds=">= 0"),
     ),
@@ -378,6 +373,7 @@ _EARLY_BIRTH = (
     "a strong object moving at association.stationary.speed_mps or more starts a track from "
     "the age association.class.tau_s"
 )
+_BIRD = "gone: a flock's erratic motion is the radar classifier's to call"
 _LOW_EL = (
     "gone: the elevation sigma is the radar's specification, raised online where the "
     "innovations show more (measurement.adaptive)"
@@ -390,8 +386,8 @@ RETIRED: dict[str, str] = {
     "update.notch_sigma_mps": "the Doppler-notch hold uses update.hold_sigma_mps",
     "update.notch_range_m": "the Doppler-notch hold applies inside the 3D range gate "
     "(gating.range_gate_m)",
-    "association.vehicle.min_rcs_dbsm": "a low moving object is a vehicle when its RCS is at "
-    "least association.size.large_rcs_dbsm",
+    "association.vehicle.min_rcs_dbsm": "an object whose mean RCS is at least "
+    "association.size.large_rcs_dbsm is too large for a small UAV",
     "association.age.full_s": "the age term is full from an age of association.class.tau_s",
     "association.rf.nearest_only": "a fix always credits only the object it fits best",
     "association.object.skip_radar_coasts": "a radar coast (a report repeating its track's "
@@ -419,6 +415,12 @@ RETIRED: dict[str, str] = {
     "measurement.radar.low_el_deg": _LOW_EL,
     "multi.early_birth_age_s": _EARLY_BIRTH,
     "multi.early_birth_speed_mps": _EARLY_BIRTH,
+    "association.vehicle.ground_alt_m": "it is association.ground.alt_m",
+    "association.vehicle.weight": "gone: a car is too large a radar target for a small UAV "
+    "(association.size)",
+    "association.bird.erratic_nis": _BIRD,
+    "association.bird.max_rcs_dbsm": _BIRD,
+    "association.bird.weight": _BIRD,
 }
 
 

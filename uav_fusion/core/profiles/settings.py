@@ -44,13 +44,9 @@ class ScoreConfig:
     stationary_min_age_s: float = 8.0
     stationary_weight: float = 5.0
     ground_alt_m: float = 4.0
-    ground_weight: float = 3.0
     below_ground_m: float = 5.0
     below_ground_weight: float = 8.0
     below_ground_sigmas: float = 0.0
-    erratic_nis: float = 6.0
-    bird_rcs_dbsm: float = -15.0
-    erratic_weight: float = 2.0
     large_rcs_dbsm: float = 0.0  # a small UAV's RCS is below 1 m^2 (the paper: up to -2.6 dBsm)
     large_rcs_weight: float = 5.0
     rf_weight: float = 1.0
