@@ -920,3 +920,39 @@ def test_a_silent_uav_is_born_only_once_its_score_reaches_init_min(site: Site) -
     assert s > base.score.follow_min
     assert any(tr.confirmed for tr in run(s - 0.01).tracks)
     assert not run(s + 0.01).tracks
+
+
+def test_reports_too_large_for_a_small_uav_update_no_track(site: Site) -> None:
+    """From 60 to 90 s every other report of the silent UAV's radar track (id 20) is a car's
+    on the ground 35 m beside it (a car's RCS, 9 dBsm): none updates a track, and the UAV's
+    track stays on it; with the bound raised out of the way the car pulls it off."""
+    sc = Crossing(site, seed=4)
+    stream: list[RadarFrame | RfAttempt] = []
+    for k, x in enumerate(sc.stream()):
+        tau = x.t - 1000.0
+        if isinstance(x, RadarFrame) and 60.0 <= tau < 90.0 and round(tau * 4) % 2 == 1:
+            car = sc.b(tau) + np.array([35.0, 0.0, 0.0])
+            car[2] = sc.r0[2] + 1.0
+            rep = dataclasses.replace(
+                sc.report(x.t, 20, car, np.zeros(3), 0.8), rcs_dbsm=9.0 + k % 3
+            )
+            x = RadarFrame(x.t, tuple(rep if r.track_id == 20 else r for r in x.tracks))
+        stream.append(x)
+
+    def worst_b(profile: Profile) -> tuple[float, MultiTracker]:
+        mt = MultiTracker(profile, site)
+        epochs = run_multi(mt, stream, 4.0, 1060.0, 1089.75)
+        errs = [
+            min(np.linalg.norm(o.x[:3] - sc.b(ep.t - 1000.0)) for o in ep.tracks)
+            for ep in epochs
+        ]
+        return max(errs), mt
+
+    worst, mt = worst_b(load_profile("tracker"))
+    assert mt.counters["rejected_large_rcs"] == 60
+    assert worst < 20.0
+    base = load_profile("tracker")
+    off = dataclasses.replace(base, score=dataclasses.replace(base.score, large_rcs_dbsm=50.0))
+    worst_off, mt_off = worst_b(off)
+    assert "rejected_large_rcs" not in mt_off.counters
+    assert worst_off > 2.0 * worst

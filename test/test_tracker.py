@@ -326,6 +326,58 @@ def test_decoys_classed_uav_at_times_are_never_followed(
     assert published and max(sc.error(s) for s in published[20:]) < 40.0
 
 
+class LowScene(Scene):
+    """The loop of :class:`Scene` flown 15 m up."""
+
+    def uav(self, t: float) -> np.ndarray:
+        p: np.ndarray = super().uav(t) - np.array([0.0, 0.0, 35.0])
+        return p
+
+
+def _alternating_car_scene(site: Site) -> tuple[Scene, tuple[float, float]]:
+    """From 60 to 120 s the radar's track on the UAV (15 m up, id 10) passes back and forth,
+    frame by frame, between the UAV and a car on the ground 40 m beside it (a car's RCS,
+    9 dBsm); no RF fix comes in that minute."""
+    window = (60.0, 120.0)
+    sc = LowScene(site, seed=21)
+    sc.build(180.0, rf_ok=lambda t: not window[0] - 4.0 <= t < window[1], fragment_s=1000.0)
+    frames = []
+    for k, fr in enumerate(sc.frames):
+        if window[0] <= fr.t < window[1] and k % 2:
+            p = sc.uav(fr.t)
+            side = (p - sc.r0) * np.array([1.0, 1.0, 0.0])
+            car = p + 40.0 * side / np.linalg.norm(side)
+            car[2] = sc.r0[2] + 1.0
+            rep = sc.report(fr.t, 10, car, 0.6, np.zeros(3), sd=3.0, rcs_dbsm=9.0)
+            fr = RadarFrame(fr.t, (rep, *fr.tracks[1:]))
+        frames.append(fr)
+    sc.frames = frames
+    return sc, window
+
+
+def test_reports_too_large_for_a_small_uav_never_move_the_track(site: Site) -> None:
+    """Every other report of the UAV's own radar track is a car's: each is discarded as
+    ``large_rcs`` and the track stays on the UAV; with the bound raised out of the way the
+    car's reports pull the track off it."""
+    sc, (t0, t1) = _alternating_car_scene(site)
+    _, steps = _run(sc, site)
+    def car(s: Step) -> bool:  # the odd frames of the window
+        return s.source == "radar" and t0 <= s.t < t1 and round(s.t * 4) % 2 == 1
+
+    cars = [s for s in steps if car(s)]
+    assert len(cars) == 120 and all(s.reason == "large_rcs" and not s.counted for s in cars)
+    inside = [s for s in steps if s.counted and t0 <= s.t < t1]
+    err_on = max(sc.error(s) for s in inside)
+    assert err_on < 15.0
+    base = load_profile("tracker")
+    off = dataclasses.replace(base, score=dataclasses.replace(base.score, large_rcs_dbsm=50.0))
+    steps0 = run_tracker(Tracker(off, site), sc.stream())
+    assert any(s.updated and car(s) for s in steps0)
+    inside0 = [s for s in steps0 if s.counted and t0 <= s.t < t1]
+    # the track sits between the two: the car's reports count as much as the UAV's
+    assert max(sc.error(s) for s in inside0) > 2.0 * err_on + 5.0
+
+
 class PadScene(Scene):
     """The UAV waits 30 s on its pad (RF on, radar blind to it: no Doppler) before its loop."""
 

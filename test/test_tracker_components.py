@@ -3,6 +3,7 @@ transition check, M-of-N and deleter, and the CV / IMM filters against filterpy.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from uav_fusion.core.estimators.models import (
     kf_update_joseph,
     position_h,
 )
-from uav_fusion.core.estimators.objects import RadarObject
+from uav_fusion.core.estimators.objects import RadarObject, too_large
 from uav_fusion.core.estimators.parts import (
     CepRfR,
     Deleter,
@@ -413,3 +414,17 @@ def test_the_uav_score_cues_at_their_edges() -> None:
     # low and moving: only a car's RCS costs (the size term), not the height
     assert lost(up=1.0, speed=12.0) == pytest.approx(0.0)
     assert lost(up=1.0, speed=12.0, rcs_mean=9.0) == pytest.approx(cfg.large_rcs_weight)
+
+
+def test_a_report_is_too_large_for_a_small_uav_from_large_rcs_dbsm_on() -> None:
+    """The per-report bound (``too_large``) at its edge; a report without an RCS is not
+    judged, nor is one whose RCS is not a number."""
+    cfg = ScoreConfig(large_rcs_dbsm=0.0)
+
+    def rep(rcs: float | None) -> RadarTrack:
+        return RadarTrack(0.0, 1, 0.0, 0.0, 0.0, 100.0, 0.0, 10.0, None, 0.5, None, rcs)
+
+    assert too_large(rep(0.0), cfg) and too_large(rep(9.0), cfg)
+    assert not too_large(rep(-0.01), cfg) and not too_large(rep(-15.0), cfg)
+    assert not too_large(rep(None), cfg) and not too_large(rep(math.nan), cfg)
+    assert too_large(rep(-3.0), dataclasses.replace(cfg, large_rcs_dbsm=-3.0))

@@ -11,7 +11,8 @@ Per radar frame (one time for all reports):
 
 1. every finite report updates its radar object; the candidates are the reports inside the
    range gate (horizontal only between it and the far gate, or below the ground), not
-   coasting, of objects scoring at least ``follow_min`` (or at
+   coasting, with an RCS of a small UAV (:func:`~uav_fusion.core.estimators.objects.
+   too_large`), of objects scoring at least ``follow_min`` (or at
    least ``emitter_follow_min`` for the track carrying the emitter whose fix last credited
    the object: a young radar track on an emitting UAV);
 2. every track is predicted to the frame's time (the deleter drops a track whose last
@@ -68,7 +69,7 @@ from uav_fusion.core.estimators.kalman import (
     merge_nis,
     velocity_nis,
 )
-from uav_fusion.core.estimators.objects import RadarObject
+from uav_fusion.core.estimators.objects import RadarObject, too_large
 from uav_fusion.core.estimators.parts import (
     MofN,
     RadarFront,
@@ -362,6 +363,9 @@ class MultiTracker:
         far2 = self.front.far2
         for _, trk, obj, p3, r, d2 in reports:
             if (d2 > gate2 and not d2 <= far2) or obj.coasting:
+                continue
+            if too_large(trk, cfg):  # not a small UAV's report
+                self._count("rejected_large_rcs")
                 continue
             e, n_, u = p3
             z: tuple[float, ...] = p3

@@ -24,7 +24,8 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   classifier's to call;
 * size: an object whose mean RCS (moving average of its reports' dBsm) is at least
   ``large_rcs_dbsm`` is too large for a small UAV (``-large_rcs_weight``; a reflector, a
-  car); one without RCS reports is not judged;
+  car); one without RCS reports is not judged. A single report that large is not the UAV's
+  whatever its object (:func:`too_large`);
 * RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
   horizontal position adds one unit of support, decaying with time constant ``rf_tau_s``
   (the profile's ``track.max_coast_s``) and capped at ``rf_max``, times ``rf_weight`` (an
@@ -74,6 +75,18 @@ RF_GATE_99_2DOF = 9.2103403719761836  # chi2.ppf(0.99, 2)
 
 #: Positions older than this fade from an object's drift fit (s; an exponential weight).
 DRIFT_TAU_S = 20.0
+
+
+def too_large(trk: RadarTrack, cfg: ScoreConfig) -> bool:
+    """Whether a report's own RCS is too large for a small UAV: at least ``large_rcs_dbsm``.
+
+    A small multirotor's looks stay below it (the paper's flight: 0.0066-0.549 m^2, at most
+    -2.6 dBsm, over 3106 reports), while most looks of a car or a reflector lie above. Such a
+    report is not the UAV's, whatever track id the radar gave it: the onboard tracker can
+    pass one id back and forth between a UAV and a car beside it. The trackers take it for no
+    track (its object still learns from it). A report without an RCS is not judged."""
+    rcs = trk.rcs_dbsm
+    return rcs is not None and rcs >= cfg.large_rcs_dbsm
 
 
 class Drift:

@@ -9,7 +9,8 @@ Every measurement an estimator is given yields exactly one :class:`Step`. Status
 * ``tentative``: the measurement started a tentative track (``reason`` ``start``) or was
   tested against one (``hit``, or the miss's ``nis`` / ``speed``); not a filter estimate;
 * ``discarded``: not a filter step at all (``range_gate``, ``class_prob``, ``not_selected``,
-  ``out_of_order``, ``no_track``, ``invalid``); the track is not changed.
+  ``out_of_order``, ``no_track``, ``invalid``; the trackers' ``coast``, ``large_rcs``,
+  ``score``, ``unreachable``, ``ground``); the track is not changed.
 
 The paper's "KF all steps" are the steps that are neither discarded nor tentative; its
 "updated estimates" the steps that used their measurement (updated, initialised, reset) and its

@@ -16,7 +16,8 @@ Per radar frame (all reports share one time):
    horizontal block; the climb rate is held near zero before such an update, and a track
    started from one takes the RF start's height prior); reports repeating their radar
    track's last velocity and RCS are coasts (``coast``: the radar's own prediction, no
-   measurement);
+   measurement); a report whose own RCS is too large for a small UAV is not the UAV's
+   (``large_rcs``: :func:`~uav_fusion.core.estimators.objects.too_large`);
 4. the follower decides which candidate updates the track, or starts one
    (:mod:`~uav_fusion.core.estimators.follow`), a restart only where the physical gates allow
    (:mod:`~uav_fusion.core.estimators.gates`).
@@ -55,7 +56,7 @@ from uav_fusion.core.estimators.kalman import (
     expand_cov3,
     expand_upper,
 )
-from uav_fusion.core.estimators.objects import RadarObject
+from uav_fusion.core.estimators.objects import RadarObject, too_large
 from uav_fusion.core.estimators.parts import (
     MofN,
     RadarFront,
@@ -402,6 +403,8 @@ class Tracker:
                 out[i] = self._step(t, RADAR, DISCARDED, "range_gate", None, p3, trk.track_id)
             elif obj.coasting:
                 out[i] = self._step(t, RADAR, DISCARDED, "coast", None, p3, trk.track_id)
+            elif too_large(trk, cfg):
+                out[i] = self._step(t, RADAR, DISCARDED, "large_rcs", None, p3, trk.track_id)
             elif d2 > gate2:
                 # inside the far gate: a horizontal-only candidate (R's horizontal block; the
                 # elevation is too poor out there)

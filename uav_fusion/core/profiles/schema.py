@@ -267,8 +267,9 @@ _ASSOCIATION = (
            bounds=">= 0"),
     ),
     *_group("association.size", TRACKER,
-        _s("large_rcs_dbsm", "large_rcs_dbsm", NUMBER, PHYSICAL, "a mean RCS of at least this "
-           "is too large for a small UAV: such an object ...", unit="dBsm"),
+        _s("large_rcs_dbsm", "large_rcs_dbsm", NUMBER, PHYSICAL, "an RCS of at least this is "
+           "too large for a small UAV: a report this large updates no track (large_rcs), and "
+           "an object whose mean RCS is ...", unit="dBsm"),
         _s("weight", "large_rcs_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
     ),
     *_group("association.rf", TRACKER,
