@@ -943,7 +943,7 @@ def test_reports_too_large_for_a_small_uav_update_no_track(site: Site) -> None:
         mt = MultiTracker(profile, site)
         epochs = run_multi(mt, stream, 4.0, 1060.0, 1089.75)
         errs = [
-            min(np.linalg.norm(o.x[:3] - sc.b(ep.t - 1000.0)) for o in ep.tracks)
+            min(float(np.linalg.norm(o.x[:3] - sc.b(ep.t - 1000.0))) for o in ep.tracks)
             for ep in epochs
         ]
         return max(errs), mt
