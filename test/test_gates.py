@@ -94,7 +94,7 @@ def _profile() -> Profile:
     """The tracker profile with the 3 s class history these scenes are timed for (an object
     classed UAV from its first report reaches the start threshold within a second or two;
     the gates under test do not depend on it)."""
-    return load_profile("tracker").with_keys({"association.class.tau_s": 3.0})
+    return load_profile("tracker").with_keys({"association.object.tau_s": 3.0})
 
 
 def _far_point(sc: Scene, dist: float) -> np.ndarray:
@@ -320,8 +320,8 @@ def test_the_ground_rule_at_its_edges() -> None:
 def test_a_still_object_with_a_moving_part_counts_as_stationary_from_its_minimum_age() -> None:
     """Near the ground, an object whose Doppler speed says it moves (the radar sees a fan or
     a flag through its moving part) but whose positions stand still is stationary once it is
-    ``stationary.min_age_s`` old, not before: a young object's few positions say little."""
-    cfg = ScoreConfig(ground_alt_m=4.0, stationary_speed_mps=1.5, stationary_min_age_s=8.0)
+    ``association.object.tau_s`` old, not before: a young object's few positions say little."""
+    cfg = ScoreConfig(ground_alt_m=4.0, stationary_speed_mps=1.5, tau_s=8.0)
     gates = PhysicalGates(cfg, max_speed_mps=30.0)
     obj = RadarObject(GROUND_ID, 0.0)
     obj.up, obj.sd_up, obj.speed = 2.0, 3.0, 5.0

@@ -619,12 +619,12 @@ def test_a_far_uav_the_radar_puts_under_the_ground_is_born_but_a_near_mirror_ima
 def test_a_strong_object_with_rf_support_is_born_at_its_nth_report(site: Site, n: int) -> None:
     """A UAV the radar classes at 0.8 from the start, 400 m out, its link's first fix at
     0.55 s: with RF support an object starts a track at once, so from the first frame after
-    that fix ``association.thresholds.init_min_reports`` alone says when: its n-th report."""
+    that fix ``track.confirm_m`` (the reports an object needs) alone says when: its n-th report."""
 
     path = _loop_400(lambda tau: 60.0)
 
     prof = load_profile("tracker")
-    prof = dataclasses.replace(prof, score=dataclasses.replace(prof.score, init_min_reports=n))
+    prof = dataclasses.replace(prof, confirm_m=n, confirm_n=max(n, prof.confirm_n))
     mt = MultiTracker(prof, site)
     born = None
     for item in scene_stream(site, [Uav(path, 41, freq_hz=FREQ_A)], 10.0, 8):
@@ -745,16 +745,16 @@ def test_beyond_the_range_gate_tracks_are_updated_and_born_horizontally(site: Si
     assert sum(1 for ep in near if ep.tracks and high(ep.t - 1000.0)) < 10
 
 
-def _with_class_tau(tau_s: float) -> Profile:
+def _with_tau(tau_s: float) -> Profile:
     p = load_profile("tracker")
-    return dataclasses.replace(p, score=dataclasses.replace(p.score, class_tau_s=tau_s))
+    return dataclasses.replace(p, score=dataclasses.replace(p.score, tau_s=tau_s))
 
 
-def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site: Site) -> None:
+def test_a_silent_uav_is_born_once_its_object_is_tau_s_old(site: Site) -> None:
     """A silent UAV seen from its take-off gets its track once its radar object is
-    `association.class.tau_s` old (it moves at `association.stationary.speed_mps` or more),
-    not after the 8 s (`stationary.min_age_s`) the stationary cue needs; a reflector the radar
-    classes as a UAV just as often, standing still, gets none either way."""
+    `association.object.tau_s` old (its history has settled), and later with a longer one; a
+    reflector the radar classes as a UAV just as often, standing still, gets none either
+    way (by that age its stationary cue applies)."""
     path = _flight(np.array([-200.0, 300.0, 0.0]), 10.0, np.array([8.0, 0.0, 0.0]))
     uav = Uav(path, 10, seen=lambda tau: tau >= 10.0)
     mast = np.array([150.0, 350.0, 30.0])
@@ -762,8 +762,7 @@ def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site:
     stream = scene_stream(site, [uav, reflector], 60.0, 7)
     firsts = {}
     for tau_s in (5.0, 8.0):
-        prof = _with_class_tau(tau_s)
-        assert prof.score.stationary_min_age_s == 8.0
+        prof = _with_tau(tau_s)
         epochs = run_multi(MultiTracker(prof, site), stream, 4.0, 1000.0, 1059.75)
         on_uav = [ep.t - 1000.0 for ep in epochs if _near(site, ep, path)]
         assert on_uav
@@ -772,7 +771,7 @@ def test_a_silent_uav_that_moves_is_born_before_the_stationary_cue_applies(site:
         assert not any(
             np.linalg.norm(o.x[:3] - (r0 + mast)) < 30.0 for ep in epochs for o in ep.tracks
         )
-    assert load_profile("tracker").score.class_tau_s == 5.0
+    assert load_profile("tracker").score.tau_s == 5.0
     assert firsts[5.0] <= 16.0 and firsts[8.0] - firsts[5.0] >= 2.5
 
 
@@ -874,14 +873,13 @@ def test_an_emitting_uav_is_followed_where_its_fixes_put_a_radar_track_still_cla
 
 def test_a_strong_objects_age_for_a_birth_at_each_rules_edge(site: Site) -> None:
     """When a strong radar object is old enough to start a track: at
-    ``association.stationary.min_age_s`` whatever its speed; at ``association.class.tau_s``
-    when its mean speed is at least ``stationary.speed_mps``; at any age with an RF fix
-    credited to it within ``track.max_coast_s`` (the score's ``rf_tau_s``), not with an
-    older one."""
+    ``association.object.tau_s`` whatever its speed (by then a stationary one has shown it);
+    at any age with an RF fix credited to it within ``track.max_coast_s`` (the score's
+    ``rf_tau_s``), not with an older one."""
     mt = MultiTracker(load_profile("tracker"), site)
     cfg = mt.cfg
-    v, still_age, tau = cfg.stationary_speed_mps, cfg.stationary_min_age_s, cfg.class_tau_s
-    assert 0.0 < tau < still_age and cfg.rf_tau_s == 20.0
+    v, tau = cfg.stationary_speed_mps, cfg.tau_s
+    assert tau == 5.0 and cfg.rf_tau_s == 20.0
 
     def old_enough(age: float, speed: float, fix_age: float | None = None) -> bool:
         obj = RadarObject(7, 1000.0)
@@ -892,9 +890,8 @@ def test_a_strong_objects_age_for_a_birth_at_each_rules_edge(site: Site) -> None
             obj.rf_t = obj.last_t - fix_age
         return mt._old_enough(obj, obj.last_t)
 
-    assert old_enough(still_age, 0.0) and not old_enough(still_age - 0.01, 0.99 * v)
+    assert old_enough(tau, 0.0) and not old_enough(tau - 0.01, 0.99 * v)
     assert old_enough(tau, v) and not old_enough(tau - 0.01, 2.0 * v)
-    assert not old_enough(tau, 0.99 * v)
     assert old_enough(0.0, 0.0, fix_age=cfg.rf_tau_s)
     assert not old_enough(0.0, 0.0, fix_age=1.01 * cfg.rf_tau_s)
 

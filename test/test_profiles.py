@@ -52,7 +52,7 @@ MOVED = {
     "notch_range_m": "the 3D range gate (1000 m in both)",
     "multi.radar_output_s": "multi.output_coast_s (3 s in both)",
     "score.vehicle_min_rcs_dbsm": "association.size.large_rcs_dbsm (0 dBsm in both)",
-    "score.age_full_s": "association.class.tau_s (5 s in both)",
+    "score.age_full_s": "association.object.tau_s (5 s in both)",
     "score.skip_radar_coasts": "always: a coast is the radar's prediction, not a measurement",
     "score.rf_nearest_only": "always: a fix credits the one object it fits best",
     "init_velocity_std_mps": "half of track.max_speed_mps (15 m/s in all)",
@@ -63,7 +63,7 @@ MOVED = {
     "multi.flat_below_ground": "always (true in all)",
     "multi.tentative_takes_radar": "never (false in all)",
     "score.rf_memory_s": "track.max_coast_s (20 s for the tracker, 30 s before)",
-    "multi.early_birth_age_s": "association.class.tau_s (5 s for the tracker, 4 s before)",
+    "multi.early_birth_age_s": "association.object.tau_s (5 s for the tracker, 4 s before)",
     "multi.early_birth_speed_mps": "association.stationary.speed_mps (1.5 m/s, 3 m/s before)",
     "robust_dof": "a constant of the Student-t update (4 in all)",
     "robust_huber_k": "gone with the huber update (no profile used it)",
@@ -74,14 +74,25 @@ MOVED = {
     "score.erratic_nis": "gone: erratic motion is the classifier's to call",
     "score.bird_rcs_dbsm": "gone with it",
     "score.erratic_weight": "gone with it",
+    "score.class_tau_s": "association.object.tau_s, the one time constant of an object's own "
+    "history (5 s in the tracker)",
+    "score.speed_tau_s": "association.object.tau_s (5 s in all)",
+    "score.stationary_min_age_s": "association.object.tau_s (8 s before)",
+    "score.class_weight": "gone: the score is in units of the class logit (1 in all)",
+    "score.below_ground_weight": "the score's veto, all the other cues can give (8, as before)",
+    "score.large_rcs_weight": "the score's veto (5 before)",
+    "score.rf_window_s": "the radar's longest update interval, 1.3 s (3 s before)",
+    "score.init_min_reports": "track.confirm_m (3 in all, 4 before)",
 }
+# Score attributes added since, or derived from another key, with their value in every
+# shipped profile.
+SCORE_NOW = {"score.tau_s": 5.0, "score.init_min_reports": 3}
 # Attributes renamed since (old: new).
 RENAMED = {"vz_hold_after_s": "hold_after_s", "vz_hold_sigma_mps": "hold_sigma_mps"}
 # Values refitted since (the tracker's, on the tune halves of the accuracy and worlds
 # benchmarks; docs/estimator.md says with what).
 RETUNED: dict[str, dict[str, Any]] = {
     "tracker": {
-        "score.class_tau_s": 5.0,
         # the radar's datasheet angle accuracy (+-2 deg) in place of fitted sigmas
         "radar_sigma_az_deg": 2.0,
         "radar_sigma_el_deg": 2.0,
@@ -150,7 +161,7 @@ ADDED_ON = {"tracker": {"adaptive_window": 200}, "tracker_smoothed": {"adaptive_
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_profiles_resolve_to_the_values_they_had(name: str) -> None:
     then = _set(_renamed(_without(FROZEN[name], MOVED)), RETUNED.get(name, {}))
-    then = _set(then, DEFAULTS.get(name, {}))
+    then = _set(_set(then, DEFAULTS.get(name, {})), SCORE_NOW)
     if name == "tracker_smoothed":  # it extends the tracker
         then = _set(then, RETUNED["tracker"])
     now = _fields(load_profile(name))
@@ -232,14 +243,14 @@ def test_extends_merges_mappings_and_replaces_lists_and_values(tmp_path: Path) -
         "extends": "base.yaml",  # a path: relative to this file
         "track": {"tentative_sources": None, "max_consecutive_rejections": None},
         "multi": {"emitter_misses": None},
-        "association": {"rf": {"window_s": 10.0}},
+        "association": {"rf": {"weight": 2.5}},
     })
     tracker, p = load_profile("tracker"), load_profile(child)
     assert p.name == "child"  # the name is the file's own
     assert p.init_sources == ("radar",) and p.max_coast_s == 30.0  # from base, two deep
     assert p.tentative_sources == () and p.max_consecutive_rejections is None  # null sets null
     assert p.multi.emitter_misses is None and p.multi.merge_s == tracker.multi.merge_s
-    assert (p.score.rf_max, p.score.rf_window_s) == (2.0, 10.0)  # merged key by key
+    assert (p.score.rf_max, p.score.rf_weight) == (2.0, 2.5)  # merged key by key
     assert p.score.rf_tau_s == 30.0  # RF evidence lasts as long as a coast
     assert p.score.follow_min == tracker.score.follow_min and p.estimator == "tracker"
     assert profile_files(child) == (child, base, config_path("profiles/tracker.yaml"))
@@ -288,7 +299,7 @@ def _tracker_doc() -> dict[str, Any]:
     [
         # unknown
         (lambda d: d["association"]["rf"].update(tau=3.0),
-         r"unknown key 'association\.rf\.tau' \(allowed: weight, max, window_s, "),
+         r"unknown key 'association\.rf\.tau' \(allowed: weight, max, support_max_cep_m\)"),
         (lambda d: d.update(colour="red"), r"unknown key 'colour' \(allowed: name, "),
         (lambda d: d["association"].update(cars={"weight": 1.0}), r"unknown key 'association\."
          r"cars'"),
@@ -297,14 +308,15 @@ def _tracker_doc() -> dict[str, Any]:
          r"unknown key 'gating\.max_coast_s': it belongs at track\.max_coast_s"),
         (lambda d: d["association"].update(rf_max=9.0),
          r"unknown key 'association\.rf_max': it belongs at association\.rf\.max"),
-        (lambda d: d["association"]["class"].update(challenge_s=2.0),
-         r"'association\.class\.challenge_s': it belongs at association\.takeover\.challenge_s"),
+        (lambda d: d["association"]["object"].update(challenge_s=2.0),
+         r"'association\.object\.challenge_s': it belongs at association\.takeover\."
+         r"challenge_s"),
         (lambda d: d.update(imm={}), r"unknown key 'imm': it belongs at motion\.imm"),
         (lambda d: d["association"].update(mode="track_score"),
          r"association\.mode is no longer a key: .*'estimator: paper \| tracker \| multi'"),
         # bad values
-        (lambda d: d["association"]["class"].update(tau_s="slow"),
-         r"association\.class\.tau_s must be a number >= 0, got 'slow'"),
+        (lambda d: d["association"]["object"].update(tau_s="slow"),
+         r"association\.object\.tau_s must be a number >= 0, got 'slow'"),
         (lambda d: d["multi"].update(merge_s=-1), r"multi\.merge_s must be a number >= 0, got -1"),
         (lambda d: d["track"].update(confirm_n=2.5), r"track\.confirm_n must be an integer >= 1"),
         (lambda d: d["association"].update(rf=[1, 2]), r"'association\.rf' must be a mapping"),
@@ -313,7 +325,7 @@ def _tracker_doc() -> dict[str, Any]:
         (lambda d: d.update(radar_selection="online"),
          r"radar_selection and 'estimator: tracker' exclude each other"),
         (lambda d: d.update(estimator="paper"),
-         r"association\.class\.tau_s needs 'estimator: tracker' or 'multi'"),
+         r"association\.object\.tau_s needs 'estimator: tracker' or 'multi'"),
         (lambda d: (d.update(estimator="paper"), d.pop("association")),
          r"gating\.far_gate_m needs 'estimator: tracker' or 'multi'"),
         (lambda d: d["track"].update(max_coast_s=None),
@@ -347,13 +359,17 @@ def test_estimator_multi_is_a_tracker_profile(tmp_path: Path) -> None:
 
 def test_with_keys_sets_keys_by_path_and_checks_them() -> None:
     p = load_profile("tracker")
-    q = p.with_keys({"association.class.tau_s": 7.0, "multi.merge_s": 2.0, "motion.q": (1.0,) * 3})
-    assert (q.score.class_tau_s, q.multi.merge_s, q.q) == (7.0, 2.0, (1.0, 1.0, 1.0))
-    assert q.score.follow_min == p.score.follow_min and p.score.class_tau_s == 5.0
-    with pytest.raises(ConfigError, match=r"association\.class\.tau_s must be a number >= 0"):
-        p.with_keys({"association.class.tau_s": -1.0})
-    with pytest.raises(ConfigError, match=r"unknown key 'association\.class_tau_s'"):
-        p.with_keys({"association.class_tau_s": 5.0})
+    q = p.with_keys({"association.object.tau_s": 7.0, "multi.merge_s": 2.0, "motion.q": (1.0,) * 3})
+    assert (q.score.tau_s, q.multi.merge_s, q.q) == (7.0, 2.0, (1.0, 1.0, 1.0))
+    assert q.score.follow_min == p.score.follow_min and p.score.tau_s == 5.0
+    with pytest.raises(ConfigError, match=r"association\.object\.tau_s must be a number >= 0"):
+        p.with_keys({"association.object.tau_s": -1.0})
+    with pytest.raises(ConfigError, match=r"unknown key 'association\.object_tau_s'"):
+        p.with_keys({"association.object_tau_s": 5.0})
+    # a retired key says where it went, here as in a file
+    with pytest.raises(ConfigError, match=r"'association\.class\.tau_s' is no longer a key: it "
+                       r"is association\.object\.tau_s"):
+        p.with_keys({"association.class.tau_s": 5.0})
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -369,7 +385,7 @@ def test_merged_keys_keep_the_values_they_replace() -> None:
     assert then["notch_range_m"] == now.range_gate_m
     assert then["multi"]["radar_output_s"] == now.multi.output_coast_s
     assert then["score"]["vehicle_min_rcs_dbsm"] == now.score.large_rcs_dbsm
-    assert RETUNED["tracker"]["score.class_tau_s"] == then["score"]["age_full_s"]
+    assert now.score.tau_s == then["score"]["age_full_s"] == then["score"]["speed_tau_s"]
     assert then["score"]["skip_radar_coasts"] and then["score"]["rf_nearest_only"]
     m = then["multi"]
     assert (m["birth_age_s"], m["continuity_bonus"], m["tentative_takes_radar"]) == (None, 0, False)

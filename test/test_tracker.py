@@ -15,6 +15,7 @@ import yaml
 
 from uav_fusion.core.errors import ConfigError
 from uav_fusion.core.estimators import Profile, load_profile, run_flight
+from uav_fusion.core.estimators.adaptive import HELD_S
 from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.gates import PhysicalGates
 from uav_fusion.core.estimators.objects import ObjectTable, RadarObject
@@ -417,7 +418,7 @@ def test_a_large_reflector_beside_the_uav_on_its_pad_is_not_taken_for_it(site: S
 
 
 def test_the_large_rcs_term_needs_an_rcs(site: Site) -> None:
-    cfg = ScoreConfig(large_rcs_dbsm=0.0, large_rcs_weight=5.0, age_weight=0.0)
+    cfg = ScoreConfig(large_rcs_dbsm=0.0, age_weight=0.0)
     table = ObjectTable(cfg, FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
     r0 = np.array(site.radar.enu, dtype=float)
 
@@ -429,7 +430,7 @@ def test_the_large_rcs_term_needs_an_rcs(site: Site) -> None:
             obj = table.update(trk)
         return obj.score(cfg)
 
-    assert feed(1, 4.0) == pytest.approx(-5.0)  # class logit 0, moving, aloft: only the term
+    assert feed(1, 4.0) == pytest.approx(-cfg.veto)  # class logit 0, moving, aloft: the veto
     assert feed(2, -10.0) == pytest.approx(0.0)
     assert feed(3, None) == pytest.approx(0.0)  # no RCS reports: nothing known
     assert feed(4, float("nan")) == pytest.approx(0.0)
@@ -604,11 +605,11 @@ def test_a_strong_radar_object_starts_or_confirms_the_track_at_its_nth_report(
     site: Site, n: int
 ) -> None:
     """A radar object classed UAV at 0.9 scores enough to start a track from its first
-    report, so ``association.thresholds.init_min_reports`` alone says when: it starts the
+    report, so ``track.confirm_m`` (the reports an object needs) alone says when: it starts the
     track with its n-th report, and it confirms at its n-th report a tentative track that an
     RF fix started before the radar saw the UAV (its earlier reports are discarded)."""
     prof = load_profile("tracker")
-    prof = dataclasses.replace(prof, score=dataclasses.replace(prof.score, init_min_reports=n))
+    prof = dataclasses.replace(prof, confirm_m=n, confirm_n=max(n, prof.confirm_n))
     sc = Scene(site, seed=3)
     sc.build(20.0, rf_ok=lambda t: False, uav_prob=lambda t: 0.9)
     steps = run_tracker(Tracker(prof, site), sc.stream())
@@ -867,7 +868,7 @@ def test_the_challenge_compares_scores_without_the_agreement_with_the_fused_trac
         obj.up = 60.0
     fol.fused = 1.0
     fol.class_logit = 1.0
-    ch.class_logit = 1.0 + (cfg.challenge_margin + above) / cfg.class_weight
+    ch.class_logit = 1.0 + cfg.challenge_margin + above
     tracker.followed = 1
     assert ch.score(cfg) >= cfg.init_min
     assert ch.score(cfg) < fol.score(cfg)  # with the agreement, the followed object leads
@@ -1195,8 +1196,8 @@ def test_below_ground_means_beyond_the_reports_vertical_sigma(
         )  # fmt: skip
     assert obj.sd_up == pytest.approx(sd_up_m)
     assert obj.below_ground(cfg) is ghost
-    base = dataclasses.replace(cfg, below_ground_weight=0.0)
-    assert obj.score(cfg) == pytest.approx(obj.score(base) - (8.0 if ghost else 0.0))
+    base = dataclasses.replace(cfg, below_ground_m=1e9)  # no ghost at all
+    assert obj.score(cfg) == pytest.approx(obj.score(base) - (cfg.veto if ghost else 0.0))
 
 
 @pytest.mark.parametrize(
@@ -1249,8 +1250,8 @@ def test_a_low_moving_object_loses_score_only_for_a_cars_rcs(
                        (0.0, 13.0, 0.0), 0.3, None, rcs)
         )  # fmt: skip
     assert obj.up < cfg.ground_alt_m and obj.speed > cfg.stationary_speed_mps
-    no_size = dataclasses.replace(cfg, large_rcs_weight=0.0)
-    lost = cfg.large_rcs_weight if large else 0.0
+    no_size = dataclasses.replace(cfg, large_rcs_dbsm=1e9)
+    lost = cfg.veto if large else 0.0
     assert obj.score(cfg) == pytest.approx(obj.score(no_size) - lost)
 
 
@@ -1321,8 +1322,8 @@ def _classifier(target_logit: float) -> Callable[[float], float]:
 
 def test_the_class_history_is_an_average_of_the_reports_logits() -> None:
     """The first report's logit starts the history; later ones are averaged with the time
-    constant class_tau_s; each logit is clipped to +-class_clip (hand values)."""
-    cfg = dataclasses.replace(ScoreConfig(), class_tau_s=3.0, class_clip=3.0)
+    constant tau_s; each logit is clipped to +-class_clip (hand values)."""
+    cfg = dataclasses.replace(ScoreConfig(), tau_s=3.0, class_clip=3.0)
     table = ObjectTable(cfg, FixedRadarR((25.0, 0.0, 0.0, 25.0, 0.0, 25.0)))
 
     def rep(t: float, p: float) -> RadarTrack:
@@ -1339,11 +1340,11 @@ def test_the_class_history_is_an_average_of_the_reports_logits() -> None:
 
 
 def test_an_rf_fix_credits_an_object_reported_within_the_window() -> None:
-    """``rf_window_s`` at its edge: a fix credits an object whose last report is at most that
-    long before (or after) it, and no object reported longer ago (its filter's prediction
-    would have drifted)."""
+    """The radar's longest update interval (``HELD_S``, 1.3 s) at its edge: a fix credits an
+    object whose last report is at most that long before (or after) it, and no object
+    reported longer ago (the radar no longer holds it)."""
     cfg = ScoreConfig()
-    w = cfg.rf_window_s
+    w = HELD_S
     assert w > 0.0
     for gap, credited in ((0.99 * w, True), (1.01 * w, False), (-0.99 * w, True)):
         table = ObjectTable(cfg, FixedRadarR((100.0, 0.0, 0.0, 100.0, 0.0, 100.0)))
@@ -1407,11 +1408,14 @@ def test_an_object_outside_the_gate_makes_a_rejection_from_its_nth_report(
     site: Site, n: int
 ) -> None:
     """The decoy above first reports 2 s into the radar gap: its reports are rejections of the
-    track from its ``init_min_reports``-th on, not before."""
+    track from its ``track.confirm_m``-th on, not before."""
     sc = _contra_scene(site, 102.0)
     base = load_profile("tracker")
     prof = dataclasses.replace(
-        base, score=dataclasses.replace(base.score, init_min=0.0, init_min_reports=n)
+        base,
+        score=dataclasses.replace(base.score, init_min=0.0),
+        confirm_m=n,
+        confirm_n=max(n, base.confirm_n),
     )
     steps = run_tracker(Tracker(prof, site), sc.stream())
     mine = [x for x in steps if x.track_id == DECOY_ID]

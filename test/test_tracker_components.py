@@ -390,30 +390,55 @@ def _airborne_object(**fields: float) -> RadarObject:
 
 def test_the_uav_score_cues_at_their_edges() -> None:
     """Each penalty of the UAV score either side of its threshold: the score differs by
-    exactly that penalty's weight; a low object that moves costs nothing of itself (the age
-    term is full from 5 s on, so ages 7.9 and 8 s score alike without the stationary cue)."""
-    cfg = ScoreConfig(class_tau_s=5.0, below_ground_sigmas=2.0)
+    exactly that penalty; a low object that moves costs nothing of itself."""
+    cfg = ScoreConfig(tau_s=5.0, below_ground_sigmas=2.0)
     base = _airborne_object().score(cfg)
 
     def lost(**fields: float) -> float:
         return base - _airborne_object(**fields).score(cfg)
 
-    # stationary: slower than stationary_speed_mps (1.5 m/s) from stationary_min_age_s (8 s)
-    assert lost(speed=1.4, last_t=8.0) == pytest.approx(cfg.stationary_weight)
-    assert lost(speed=1.4, last_t=7.9) == pytest.approx(0.0)
-    assert lost(speed=1.6, last_t=8.0) == pytest.approx(0.0)
+    def still_cost(age: float) -> float:  # standing still against moving, at the same age
+        moving = _airborne_object(speed=1.6, last_t=age).score(cfg)
+        return moving - _airborne_object(speed=1.4, last_t=age).score(cfg)
+
+    # stationary: slower than stationary_speed_mps (1.5 m/s) from an age of tau_s (5 s)
+    assert still_cost(5.0) == pytest.approx(cfg.stationary_weight)
+    assert still_cost(4.99) == pytest.approx(0.0)
     # too large for a small UAV: a mean RCS of large_rcs_dbsm (0 dBsm) and up, when known
-    assert lost(rcs_mean=0.0) == pytest.approx(cfg.large_rcs_weight)
+    assert lost(rcs_mean=0.0) == pytest.approx(cfg.veto)
     assert lost(rcs_mean=-0.1) == pytest.approx(0.0)
     assert lost(rcs_mean=9.0, rcs_seen=False) == pytest.approx(0.0)
     # a ghost: more than below_ground_m (5 m) and two vertical sigmas of its reports below
-    assert lost(up=-6.1, sd_up=3.0) == pytest.approx(cfg.below_ground_weight)
+    assert lost(up=-6.1, sd_up=3.0) == pytest.approx(cfg.veto)
     assert lost(up=-5.9, sd_up=3.0) == pytest.approx(0.0)
-    assert lost(up=-5.1, sd_up=1.0) == pytest.approx(cfg.below_ground_weight)
+    assert lost(up=-5.1, sd_up=1.0) == pytest.approx(cfg.veto)
     assert lost(up=-4.9, sd_up=1.0) == pytest.approx(0.0)
-    # low and moving: only a car's RCS costs (the size term), not the height
+    # low and moving: only a car's RCS costs (the size rule), not the height
     assert lost(up=1.0, speed=12.0) == pytest.approx(0.0)
-    assert lost(up=1.0, speed=12.0, rcs_mean=9.0) == pytest.approx(cfg.large_rcs_weight)
+    assert lost(up=1.0, speed=12.0, rcs_mean=9.0) == pytest.approx(cfg.veto)
+
+
+@pytest.mark.parametrize("cue", [{"up": -60.0}, {"rcs_mean": 3.0}])
+def test_an_object_that_cannot_be_a_uav_scores_at_most_zero_whatever_its_other_cues(
+    cue: dict[str, float],
+) -> None:
+    """The veto is all that the other cues can give: a ghost or a target too large, with a
+    class history, RF support, agreement and age each at their largest, scores exactly 0 (no
+    threshold that lets an object update or start a track is reached); with one of those a
+    little short of its largest, below 0."""
+    cfg = ScoreConfig(rf_max=3.0, rf_weight=1.0, fused_weight=1.5, age_weight=0.5)
+    assert cfg.veto == pytest.approx(cfg.class_clip + 3.0 + 1.5 + 0.5)
+
+    def scored(class_logit: float) -> float:
+        obj = _airborne_object(**cue)
+        obj.class_logit, obj.fused = class_logit, 1.0
+        obj.rf_support, obj.rf_t = 10.0, obj.last_t
+        return obj.score(cfg)
+
+    assert scored(cfg.class_clip) == pytest.approx(0.0)
+    assert scored(cfg.class_clip - 0.01) < 0.0
+    tracker = load_profile("tracker").score
+    assert 0.0 < tracker.follow_min <= tracker.init_min
 
 
 def test_a_report_is_too_large_for_a_small_uav_from_large_rcs_dbsm_on() -> None:

@@ -16,7 +16,7 @@ A sweep spec (YAML, e.g. ``bench/sweep_q.yaml``) names:
     estimator profiles (names under ``config/profiles/`` or paths relative to the spec);
 ``parameters``
     a mapping from a profile key, by its YAML path (``motion.q``, ``gating.nis_probability``,
-    ``association.class.tau_s``; any key of the schema, :mod:`~uav_fusion.core.estimators.
+    ``association.object.tau_s``; any key of the schema, :mod:`~uav_fusion.core.estimators.
     schema`, whose value is a number, an integer, true/false, a choice or ``motion.q``), to
     the list of values to try; ``multi.<key>`` (the multi-UAV tracker's section) needs a
     multi-UAV definition; every combination is run with every profile on every flight;

@@ -20,7 +20,7 @@ says so:
   object table's own terms decide: "near the ground" is a mean height below
   ``ground_alt_m`` plus two of its reports' mean vertical sigmas; "stationary" is a mean
   Doppler speed below ``stationary_speed_mps`` or, once the object is
-  ``stationary_min_age_s`` old, recent positions that stand still (:class:`~uav_fusion.core.
+  ``tau_s`` old, recent positions that stand still (:class:`~uav_fusion.core.
   estimators.objects.Drift`: a fan or a flag is seen through its moving part, whose Doppler
   velocity its reports carry). The track is airborne once a confirmed state stood more than
   ``ground_alt_m`` plus two of its own vertical sigmas up.
@@ -117,7 +117,7 @@ class PhysicalGates:
         v = cfg.stationary_speed_mps
         if obj.speed < v:
             return True
-        return obj.age_s >= cfg.stationary_min_age_s and obj.drift.still(v)
+        return obj.age_s >= cfg.tau_s and obj.drift.still(v)
 
     def refuse_start(self, obj: RadarObject, t: float, e: float, n: float) -> str | None:
         """Why ``obj`` (reported at ``e``, ``n``) may not start the track at ``t``, or None."""

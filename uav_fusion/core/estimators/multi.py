@@ -25,9 +25,9 @@ Per radar frame (one time for all reports):
    weight); a confirmed track whose own radar object reported outside its gate counts a
    rejection;
 4. an unassigned candidate whose object is strong (score >= ``init_min`` with at least
-   ``init_min_reports`` reports), old enough (the score's ``stationary_min_age_s``, or its
-   ``class_tau_s`` while it moves at ``stationary_speed_mps`` or more, or with an RF fix
-   credited to it within ``rf_tau_s``) and outside every track's gate
+   ``init_min_reports`` reports, the profile's ``track.confirm_m``), old enough (the
+   score's ``tau_s``, or any age with an RF fix credited to it within ``rf_tau_s``) and
+   outside every track's gate
    starts a confirmed track from its object's state (at the RF start's height prior when it
    has no usable height; never from a ghost below the ground);
 5. two confirmed tracks that stay close (``merge_nis`` on the combined position covariance)
@@ -377,7 +377,7 @@ class MultiTracker:
                 # the elevation of a low target is the radar's weak point (ground multipath):
                 # range and azimuth still place it; its object without the below-ground term
                 if obj.below_ground(cfg):
-                    s += cfg.below_ground_weight
+                    s += cfg.veto
                 z, r = (e, n_), (r[0], r[1], r[3])
             if s < cfg.follow_min:
                 # too weak to follow, unless where an emitter's fix says its UAV is: then only
@@ -491,15 +491,10 @@ class MultiTracker:
 
     def _old_enough(self, obj: RadarObject, t: float) -> bool:
         """Whether a strong object has been seen long enough to start a track: for the
-        score's ``stationary_min_age_s`` (by then clutter has shown that it stands still); for
-        ``class_tau_s`` (its class history and age term are full) while its mean speed is at
-        least ``stationary_speed_mps`` (it does not stand still); or at any age with an RF fix
-        credited to it within ``rf_tau_s``."""
-        cfg = self.cfg
-        age = obj.age_s
-        if age >= cfg.stationary_min_age_s or obj.rf_recent(t, cfg.rf_tau_s):
-            return True
-        return age >= cfg.class_tau_s and obj.speed >= cfg.stationary_speed_mps
+        score's ``tau_s`` (its class history and age term are full, and clutter has shown
+        that it stands still), or at any age with an RF fix credited to it within
+        ``rf_tau_s``."""
+        return obj.age_s >= self.cfg.tau_s or obj.rf_recent(t, self.cfg.rf_tau_s)
 
     def _apart(self, a: int, b: int, took: dict[int, int], cands: list[_Cand]) -> bool:
         """Whether candidate ``b``, inside live track ``a``'s gate, is another UAV than the

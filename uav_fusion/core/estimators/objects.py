@@ -3,33 +3,36 @@
 The radar's onboard tracker gives each report a track id. :class:`ObjectTable` keeps one
 :class:`RadarObject` per id for the whole flight (its own small CV filter, so multi-target
 tracking is an extension, not a rewrite) and a *UAV score* per object, a sum of log-odds-like
-terms from independent cues (no single cue decides; the radar's classifier errs both ways):
+terms from independent cues (no single cue decides; the radar's classifier errs both ways),
+in units of the class logit. Every moving average of an object's own cues has the one time
+constant ``tau_s``: the time its history needs to say what the object is.
 
-* class history: exponential moving average (time constant ``class_tau_s``) of the logit of
-  the UAV class probability, clipped to ``+-class_clip``, times ``class_weight``, each
-  report's output taken as it is (a model of how a particular classifier's output on a young
-  track evolves would be that classifier's constants, not the tracker's);
+* class history: exponential moving average of the logit of the UAV class probability,
+  clipped to ``+-class_clip``, each report's output taken as it is (a model of how a
+  particular classifier's output on a young track evolves would be that classifier's
+  constants, not the tracker's);
 * kinematics: an object whose mean height (moving average of its reports' ENU up) lies
   below the ground by more than ``below_ground_m``, and by more than ``below_ground_sigmas``
   times the mean vertical standard deviation of its reports (from the radar's polar R: a few
   metres close in, tens of metres near the horizon far out, where a UAV's low pass scatters
-  below the ground), is a multipath ghost (``-below_ground_weight``); one older than
-  ``stationary_min_age_s`` whose mean speed stays below ``stationary_speed_mps`` is clutter
-  (``-stationary_weight``: a mast, a tower or a roof edge stands still at any height; a
-  multirotor that hovers in front of the radar pays it too, but sits in the radar's Doppler
-  notch and is seldom reported then). A low object is not judged by its height or speed: a
-  car is a large radar target (below), and a parked one, like any object near the ground that
-  stands still, is the physical gates' concern (:mod:`~uav_fusion.core.estimators.gates`: it
-  never becomes the UAV without RF corroboration); a flock's erratic motion is the
-  classifier's to call;
+  below the ground), is a multipath ghost (loses :attr:`ScoreConfig.veto`, all that the
+  other cues can give: it can be no UAV); one older than ``tau_s`` whose mean speed stays
+  below ``stationary_speed_mps`` is clutter (``-stationary_weight``: a mast, a tower or a
+  roof edge stands still at any height; a multirotor that hovers in front of the radar pays
+  it too, but sits in the radar's Doppler notch and is seldom reported then). A low object
+  is not judged by its height or speed: a car is a large radar target (below), and a parked
+  one, like any object near the ground that stands still, is the physical gates' concern
+  (:mod:`~uav_fusion.core.estimators.gates`: it never becomes the UAV without RF
+  corroboration); a flock's erratic motion is the classifier's to call;
 * size: an object whose mean RCS (moving average of its reports' dBsm) is at least
-  ``large_rcs_dbsm`` is too large for a small UAV (``-large_rcs_weight``; a reflector, a
+  ``large_rcs_dbsm`` is too large for a small UAV (loses the veto too; a reflector, a
   car); one without RCS reports is not judged. A single report that large is not the UAV's
   whatever its object (:func:`too_large`);
-* RF agreement: each RF fix within the 99 % chi-square gate of the object's predicted
-  horizontal position adds one unit of support, decaying with time constant ``rf_tau_s``
-  (the profile's ``track.max_coast_s``) and capped at ``rf_max``, times ``rf_weight`` (an
-  emitter at the object's position is strong
+* RF agreement: each RF fix within the 99 % chi-square gate of the predicted horizontal
+  position of an object the radar still reports (a report within its longest update
+  interval, :data:`~uav_fusion.core.estimators.adaptive.HELD_S`) adds one unit of support,
+  decaying with time constant ``rf_tau_s`` (the profile's ``track.max_coast_s``) and capped
+  at ``rf_max``, times ``rf_weight`` (an emitter at the object's position is strong
   evidence of a UAV); a fix credits only the object it fits best (smallest gate distance),
   not every object in its gate (clutter beside a UAV, or near a UAV on its pad that the
   radar does not see, would otherwise share the UAV's emitter); a fix too
@@ -41,14 +44,15 @@ terms from independent cues (no single cue decides; the radar's classifier errs 
   if it had been credited when each was made (decayed since). A fix given with its emitter's
   key (the multi-UAV tracker) leaves that key on the objects it credits
   (:attr:`RadarObject.rf_key`, the last one);
-* agreement with the fused track: moving average of "this object's report had an NIS of at
-  most ``fused_nis`` against the UAV track" (closer than the gate: the gate is wide when
-  the track's R allows for correlated errors), times ``fused_weight``; nothing is recorded
+* agreement with the fused track: moving average (time constant ``fused_tau_s``) of "this
+  object's report had an NIS of at most ``fused_nis`` against the UAV track" (closer than
+  the gate: the gate is wide when the track's R allows for correlated errors), times
+  ``fused_weight``; nothing is recorded
   while the track's horizontal position standard deviation exceeds ``lost_sigma_m`` (0: no
   limit; after a long coast the gate spans far more than the UAV's neighbourhood, and a
   first report inside it would count as full agreement: ``Tracker``);
-* age: ``age_weight * min(1, age / class_tau_s)`` (a track that persists is more likely
-  real; the term is full once the object is as old as its class history's time constant).
+* age: ``age_weight * min(1, age / tau_s)`` (a track that persists is more likely real; the
+  term is full once the object's history has settled).
 
 A *coasted* report is one whose velocity and RCS repeat the same radar track's previous report
 exactly: the radar's own tracker had no detection for it and reported its prediction
@@ -63,6 +67,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from uav_fusion.core.estimators.adaptive import HELD_S
 from uav_fusion.core.estimators.kalman import CvKalman, PackedR
 from uav_fusion.core.profiles.settings import ScoreConfig
 from uav_fusion.core.records import RadarTrack
@@ -239,15 +244,15 @@ class RadarObject:
         """The UAV score at the object's last report (see the module text); without the
         agreement with the fused track when ``fused`` is false (the evidence the object
         carries of its own)."""
-        s = cfg.class_weight * self.class_logit
+        s = self.class_logit
         age = self.age_s
         if self.below_ground(cfg):  # a multipath ghost
-            s -= cfg.below_ground_weight
-        elif age >= cfg.stationary_min_age_s and self.speed < cfg.stationary_speed_mps:
+            s -= cfg.veto
+        elif age >= cfg.tau_s and self.speed < cfg.stationary_speed_mps:
             s -= cfg.stationary_weight
         if self.rcs_seen and self.rcs_mean >= cfg.large_rcs_dbsm:
-            s -= cfg.large_rcs_weight
-        # min(rf_max, rf_support_at(last_t)) and min(1, age / class_tau_s) as conditionals
+            s -= cfg.veto
+        # min(rf_max, rf_support_at(last_t)) and min(1, age / tau_s) as conditionals
         sup = self.rf_support
         if sup != 0.0:
             tau = cfg.rf_tau_s
@@ -256,7 +261,7 @@ class RadarObject:
         s += cfg.rf_weight * (sup if sup < rf_max else rf_max)
         if fused:
             s += cfg.fused_weight * self.fused
-        full = cfg.class_tau_s
+        full = cfg.tau_s
         if full > 0:
             f = age / full
             s += cfg.age_weight * (f if f < 1.0 else 1.0)
@@ -309,7 +314,7 @@ class ObjectTable:
         old = obj.signature
         coast = old is not None and vel is not None and sig == old
         # one smoothing factor per time constant for this interval (the EMAs below)
-        tau = cfg.speed_tau_s
+        tau = cfg.tau_s
         if kf is None or dt < 0:
             kf = self._start_filter(obj, t, e, n, u, r, rcs)
             dt = 0.0
@@ -412,8 +417,8 @@ class ObjectTable:
             lg = -c
         if first:
             obj.class_logit = lg
-        else:  # _ema(obj.class_logit, lg, dt, class_tau_s), inlined
-            tau = cfg.class_tau_s
+        else:  # _ema(obj.class_logit, lg, dt, tau_s), inlined
+            tau = cfg.tau_s
             if tau <= 0:
                 obj.class_logit = lg
             else:
@@ -446,7 +451,7 @@ class ObjectTable:
         best: tuple[float, RadarObject] | None = None
         for obj in self.objects.values():
             kf = obj.kf
-            if kf is None or abs(t - obj.last_t) > cfg.rf_window_s:
+            if kf is None or abs(t - obj.last_t) > HELD_S:
                 continue
             dt = t - obj.kf_t  # from the filter's own time (coasts leave it behind)
             x = kf.x

@@ -33,7 +33,7 @@ from uav_fusion.core.profiles.checks import (
     validate_transition,
 )
 from uav_fusion.core.profiles.inherit import profile_path, resolve
-from uav_fusion.core.profiles.schema import BY_PATH, KEYS, find
+from uav_fusion.core.profiles.schema import BY_PATH, KEYS, RETIRED, find
 from uav_fusion.core.profiles.settings import MultiSettings, ScoreConfig
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.yamlio import read_yaml_file
@@ -108,8 +108,11 @@ class Profile:
         # the trackers' RF evidence lasts as long as a track may coast (schema.DERIVED; a
         # tracker profile must set max_coast_s, the paper's estimator reads no RF support)
         tau = math.inf if self.max_coast_s is None else float(self.max_coast_s)
-        if self.score.rf_tau_s != tau:
-            object.__setattr__(self, "score", replace(self.score, rf_tau_s=tau))
+        # and an object needs as many reports to start a track as a tentative track needs hits
+        # to be confirmed (track.confirm_m)
+        if (self.score.rf_tau_s, self.score.init_min_reports) != (tau, self.confirm_m):
+            score = replace(self.score, rf_tau_s=tau, init_min_reports=self.confirm_m)
+            object.__setattr__(self, "score", score)
 
     @property
     def init_velocity_std_mps(self) -> float:
@@ -137,14 +140,17 @@ class Profile:
 
     def with_keys(self, values: Mapping[str, Any]) -> Profile:
         """A copy with some keys set by their YAML path (``gating.nis_probability``,
-        ``association.class.tau_s``, ``multi.merge_s``), each value as
+        ``association.object.tau_s``, ``multi.merge_s``), each value as
         :func:`~uav_fusion.core.profiles.checks.convert` gives it (validated again)."""
         changes: dict[str, Any] = {}
         parts: dict[str, dict[str, Any]] = {"score": {}, "multi": {}}
         for path, value in values.items():
             key = find(path)
             if key is None or not key.attr:
-                raise ConfigError(f"{self.source or self.name}: unknown key '{path}'")
+                where = self.source or self.name
+                if path in RETIRED:
+                    raise ConfigError(f"{where}: '{path}' is no longer a key: {RETIRED[path]}")
+                raise ConfigError(f"{where}: unknown key '{path}'")
             owner, _, name = key.attr.rpartition(".")
             (parts[owner] if owner else changes)[name] = value
         for owner, vals in parts.items():

@@ -236,21 +236,15 @@ _UPDATE = _group(
 )
 _ASSOCIATION = (
     *_group("association.class", TRACKER,
-        _s("weight", "class_weight", NUMBER, DESIGN, "weight of the class history (moving "
-           "average of the UAV class logit)", bounds=">= 0"),
-        _s("tau_s", "class_tau_s", NUMBER, FITTED, "time constant of that average", unit="s",
-           bounds=">= 0", fit=TUNED),
-        _s("clip", "class_clip", NUMBER, DESIGN, "each logit is clipped to +-clip",
-           bounds=">= 0"),
+        _s("clip", "class_clip", NUMBER, DESIGN, "the class history (moving average of the UAV "
+           "class logit, the score's unit) clips each logit to +-clip", bounds=">= 0"),
     ),
     *_group("association.stationary", TRACKER,
         _s("speed_mps", "stationary_speed_mps", NUMBER, PHYSICAL, "an object whose mean speed "
            "stays below this ... (the physical gates' ground rule also counts one whose "
            "positions move slower: docs/estimator.md)", unit="m/s", bounds=">= 0"),
-        _s("min_age_s", "stationary_min_age_s", NUMBER, DESIGN, "... once older than this ...",
-           unit="s", bounds=">= 0"),
-        _s("weight", "stationary_weight", NUMBER, DESIGN, "... loses this much",
-           bounds=">= 0"),
+        _s("weight", "stationary_weight", NUMBER, DESIGN, "... once older than "
+           "association.object.tau_s loses this much", bounds=">= 0"),
     ),
     *_group("association.ground", TRACKER,
         _s("alt_m", "ground_alt_m", NUMBER, PHYSICAL, "an object whose mean height lies below "
@@ -262,22 +256,18 @@ _ASSOCIATION = (
         _s("below_ground_m", "below_ground_m", NUMBER, PHYSICAL, "an object whose mean height "
            "lies more than this below the ground ...", unit="m", bounds=">= 0"),
         _s("sigmas", "below_ground_sigmas", NUMBER, FITTED, "... and more than this many of "
-           "its reports' vertical sigmas ...", bounds=">= 0", fit=TUNED),
-        _s("weight", "below_ground_weight", NUMBER, DESIGN, "... loses this much",
-           bounds=">= 0"),
+           "its reports' vertical sigmas is no UAV (its score loses all that the other cues "
+           "can give)", bounds=">= 0", fit=TUNED),
     ),
     *_group("association.size", TRACKER,
         _s("large_rcs_dbsm", "large_rcs_dbsm", NUMBER, PHYSICAL, "an RCS of at least this is "
            "too large for a small UAV: a report this large updates no track (large_rcs), and "
-           "an object whose mean RCS is ...", unit="dBsm"),
-        _s("weight", "large_rcs_weight", NUMBER, DESIGN, "... loses this much", bounds=">= 0"),
+           "an object whose mean RCS is that large is no UAV (as a ghost)", unit="dBsm"),
     ),
     *_group("association.rf", TRACKER,
         _s("weight", "rf_weight", NUMBER, DESIGN, "weight of the RF support (fixes inside the "
            "object's 99 % gate)", bounds=">= 0"),
         _s("max", "rf_max", NUMBER, DESIGN, "the support is capped at this", bounds=">= 0"),
-        _s("window_s", "rf_window_s", NUMBER, DESIGN, "a fix credits objects with a report "
-           "this recent", unit="s", bounds=">= 0"),
         _s("support_max_cep_m", "rf_support_max_cep_m", NUMBER, FITTED, "single-UAV tracker: "
            "a fix discarded for its CEP still credits when its CEP is at most this (0: never)",
            unit="m", bounds=">= 0", fit=TUNED),
@@ -285,8 +275,9 @@ _ASSOCIATION = (
     *_group("association.fused", TRACKER,
         _s("weight", "fused_weight", NUMBER, DESIGN, "weight of the agreement with the fused "
            "track", bounds=">= 0"),
-        _s("tau_s", "fused_tau_s", NUMBER, DESIGN, "time constant of its moving average",
-           unit="s", bounds=">= 0"),
+        _s("tau_s", "fused_tau_s", NUMBER, DESIGN, "time constant of its moving average (the "
+           "track's agreement builds up over longer than an object's own history)", unit="s",
+           bounds=">= 0"),
         _s("nis", "fused_nis", NUMBER, DESIGN, "a report agrees at an NIS of at most this",
            bounds=">= 0"),
         _s("lost_sigma_m", "lost_sigma_m", NUMBER, FITTED, "single-UAV tracker: no agreement "
@@ -295,8 +286,7 @@ _ASSOCIATION = (
     ),
     *_group("association.age", TRACKER,
         _s("weight", "age_weight", NUMBER, DESIGN, "weight of the age term, full from an age of "
-           "association.class.tau_s (the time the class history needs to settle)",
-           bounds=">= 0"),
+           "association.object.tau_s", bounds=">= 0"),
     ),
     *_group("association.object", TRACKER,
         _s("q", "object_q", NUMBER, DESIGN, "process noise of each object's CV filter",
@@ -304,15 +294,15 @@ _ASSOCIATION = (
         _s("floor_m", "object_floor_m", NUMBER, DESIGN, "its polar R's floor (close in, an "
            "object's reports scatter more than the polar R: the onboard tracker's lag)",
            unit="m", bounds=">= 0"),
-        _s("speed_tau_s", "speed_tau_s", NUMBER, DESIGN, "time constant of the objects' "
-           "moving averages of speed, height and RCS", unit="s", bounds=">= 0"),
+        _s("tau_s", "tau_s", NUMBER, FITTED, "time constant of every moving average of an "
+           "object's own cues (class logit, speed, height, RCS): the time its history needs "
+           "to say what it is; an object is judged stationary, and its age term is full, "
+           "from this age", unit="s", bounds=">= 0", fit=TUNED),
     ),
     *_group("association.thresholds", TRACKER,
         _s("follow_min", "follow_min", NUMBER, FITTED, "objects scoring at least this may "
            "update a confirmed track", fit=TUNED),
         _s("init_min", "init_min", NUMBER, DESIGN, "an object scoring at least this ...", ),
-        _s("init_min_reports", "init_min_reports", INTEGER, DESIGN, "... with this many "
-           "reports may start a track", bounds=">= 0"),
     ),
     *_group("association.takeover", TRACKER,
         _s("challenge_s", "challenge_s", NUMBER, FITTED, "a strong object outside the gate "
@@ -368,11 +358,20 @@ KEYS: tuple[Key, ...] = (
 BY_PATH: dict[str, Key] = {k.path: k for k in KEYS}
 
 #: Attributes a profile derives from another key instead of reading a key of their own.
-DERIVED: dict[str, str] = {"score.rf_tau_s": "track.max_coast_s"}
+DERIVED: dict[str, str] = {
+    "score.rf_tau_s": "track.max_coast_s",
+    "score.init_min_reports": "track.confirm_m",
+}
 
 _EARLY_BIRTH = (
     "a strong object moving at association.stationary.speed_mps or more starts a track from "
-    "the age association.class.tau_s"
+    "the age association.object.tau_s"
+)
+_TAU = "it is association.object.tau_s, the one time constant of an object's own history"
+_VETO = (
+    "gone: an object that cannot be a small UAV loses all that the other cues can give "
+    "(association.class.clip + association.rf.weight x association.rf.max + "
+    "association.fused.weight + association.age.weight)"
 )
 _BIRD = "gone: a flock's erratic motion is the radar classifier's to call"
 _LOW_EL = (
@@ -389,7 +388,7 @@ RETIRED: dict[str, str] = {
     "(gating.range_gate_m)",
     "association.vehicle.min_rcs_dbsm": "an object whose mean RCS is at least "
     "association.size.large_rcs_dbsm is too large for a small UAV",
-    "association.age.full_s": "the age term is full from an age of association.class.tau_s",
+    "association.age.full_s": "the age term is full from an age of association.object.tau_s",
     "association.rf.nearest_only": "a fix always credits only the object it fits best",
     "association.object.skip_radar_coasts": "a radar coast (a report repeating its track's "
     "velocity and RCS) never updates the track or the object",
@@ -398,7 +397,7 @@ RETIRED: dict[str, str] = {
     "track.rf_init_altitude_std_m": "the RF start's height standard deviation is "
     "track.rf_init_altitude_m",
     "multi.birth_age_s": "a strong object starts a track once older than "
-    "association.stationary.min_age_s",
+    "association.object.tau_s",
     "multi.continuity_bonus": "gone: the assignment cost is the NIS and the velocity's NIS",
     "multi.merge_keeps_live": "always: a merge keeps the recently updated track",
     "multi.flat_below_ground": "always: a report below the ground updates east and north only",
@@ -422,6 +421,18 @@ RETIRED: dict[str, str] = {
     "association.bird.erratic_nis": _BIRD,
     "association.bird.max_rcs_dbsm": _BIRD,
     "association.bird.weight": _BIRD,
+    "association.class.tau_s": _TAU,
+    "association.object.speed_tau_s": _TAU,
+    "association.stationary.min_age_s": "an object is judged stationary once older than "
+    "association.object.tau_s",
+    "association.class.weight": "gone: the score is in units of the class logit (scale the "
+    "other weights and the thresholds instead)",
+    "association.ghost.weight": _VETO,
+    "association.size.weight": _VETO,
+    "association.rf.window_s": "a fix credits objects reported within the radar's longest "
+    "update interval (1.3 s, its datasheet)",
+    "association.thresholds.init_min_reports": "an object needs track.confirm_m reports to "
+    "start a track",
 }
 
 

@@ -37,24 +37,22 @@ class ScoreConfig:
     """Weights and thresholds of the UAV score: a profile's ``association`` groups (each key
     and the field it sets: :mod:`~uav_fusion.core.profiles.schema`)."""
 
-    class_weight: float = 1.0
-    class_tau_s: float = 8.0
+    # one time constant for an object's own history: the moving averages of its class logit,
+    # speed, height and RCS; an object is judged stationary, and its age term is full, once
+    # this old
+    tau_s: float = 5.0
     class_clip: float = 3.0
     stationary_speed_mps: float = 1.5
-    stationary_min_age_s: float = 8.0
     stationary_weight: float = 5.0
     ground_alt_m: float = 4.0
     below_ground_m: float = 5.0
-    below_ground_weight: float = 8.0
     below_ground_sigmas: float = 0.0
     large_rcs_dbsm: float = 0.0  # a small UAV's RCS is below 1 m^2 (the paper: up to -2.6 dBsm)
-    large_rcs_weight: float = 5.0
     rf_weight: float = 1.0
     # RF support's time constant and a fix's wait for an object: a profile sets it to its
     # track.max_coast_s (Profile; infinite without one), not a key of its own
     rf_tau_s: float = 30.0
     rf_max: float = 3.0
-    rf_window_s: float = 3.0
     rf_support_max_cep_m: float = 0.0
     fused_weight: float = 1.5
     fused_tau_s: float = 10.0
@@ -64,9 +62,19 @@ class ScoreConfig:
     age_weight: float = 0.5
     object_q: float = 5.0
     object_floor_m: float = 10.0
-    speed_tau_s: float = 5.0
     follow_min: float = 0.0
     init_min: float = 1.0
-    init_min_reports: int = 4
+    # reports an object needs before it may start a track: a profile sets it to its
+    # track.confirm_m (Profile), not a key of its own
+    init_min_reports: int = 3
     challenge_s: float = 0.0  # 0: a followed object is never challenged (tracker.py)
     challenge_margin: float = 0.5
+
+    @property
+    def veto(self) -> float:
+        """What an object that cannot be a small UAV loses (a multipath ghost below the
+        ground, a target too large): as much as every other cue can give at most (the
+        clipped class logit, the capped RF support, full agreement and the full age term),
+        so that its score stays at or below 0, where the shipped profile's ``follow_min`` and
+        ``init_min`` lie above."""
+        return self.class_clip + self.rf_weight * self.rf_max + self.fused_weight + self.age_weight
