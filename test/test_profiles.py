@@ -83,6 +83,8 @@ MOVED = {
     "score.large_rcs_weight": "the score's veto (5 before)",
     "score.rf_window_s": "the radar's longest update interval, 1.3 s (3 s before)",
     "score.init_min_reports": "track.confirm_m (3 in all, 4 before)",
+    "score.lost_sigma_m": "the report's own R against the track's horizontal variance (50 m "
+    "in the tracker before)",
 }
 # Score attributes added since, or derived from another key, with their value in every
 # shipped profile.

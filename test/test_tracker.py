@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from uav_fusion.core.errors import ConfigError
-from uav_fusion.core.estimators import Profile, load_profile, run_flight
+from uav_fusion.core.estimators import Profile, follow, load_profile, run_flight
 from uav_fusion.core.estimators.adaptive import HELD_S
 from uav_fusion.core.estimators.base import feed
 from uav_fusion.core.estimators.gates import PhysicalGates
@@ -673,13 +673,20 @@ def _coast_with_bird(site: Site) -> Scene:
     return sc
 
 
-def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site: Site) -> None:
+def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(
+    site: Site, monkeypatch: pytest.MonkeyPatch
+) -> None:
     gap, bird_id, t_bird = COAST_GAP, BIRD_ID, T_BIRD
     sc = _coast_with_bird(site)
     base = _rule_alone()
+    items = sc.stream()
+    first = min(f.t for f in sc.frames if any(r.track_id == bird_id for r in f.tracks))
+    probe = Tracker(base, site)
+    run_tracker(probe, [i for i in items if i.t < first])
+    _, P = probe.predict_to(first)
+    assert math.sqrt(max(P[0, 0], P[1, 1])) > 60.0  # a coast of 10 s
     tracker = Tracker(base, site)
-    steps = run_tracker(tracker, sc.stream())
-    assert tracker.cfg.lost_sigma_m > 0
+    steps = run_tracker(tracker, items)
     assert not any(s.track_id == bird_id and (s.updated or s.coasted) for s in steps)
     back = [s for s in steps if s.updated and s.source == "radar" and s.t >= gap[1]]
     assert back and back[0].t < gap[1] + 1.0 and back[0].track_id != bird_id
@@ -687,32 +694,23 @@ def test_an_object_that_appears_inside_a_long_coasting_gate_is_not_followed(site
     assert late and max(sc.error(s) for s in late) < 40.0
     # without the rule the object's first report inside the wide gate counts as agreement
     # with the track, which is enough to follow it (the track jumps 150 m and stays there)
-    off = dataclasses.replace(base, score=dataclasses.replace(base.score, lost_sigma_m=0.0))
-    steps0 = run_tracker(Tracker(off, site), _coast_with_bird(site).stream())
+    monkeypatch.setattr(follow, "informative", lambda var, r: True)
+    steps0 = run_tracker(Tracker(base, site), _coast_with_bird(site).stream())
     taken = [s for s in steps0 if s.updated and s.track_id == bird_id]
     assert taken and taken[0].t < t_bird + 1.0
 
 
-def test_the_lost_track_rule_at_its_edge(site: Site) -> None:
-    """``lost_sigma_m`` at its boundary, in the scene above: set just above the coasting
-    track's horizontal sigma when the object first reports, the object's report counts as
-    agreement and the track follows it; just below, it does not."""
-    sc = _coast_with_bird(site)
-    items = sc.stream()
-    first = min(f.t for f in sc.frames if any(r.track_id == BIRD_ID for r in f.tracks))
-    base = _rule_alone()
-    probe = Tracker(base, site)
-    run_tracker(probe, [i for i in items if i.t < first])
-    _, P = probe.predict_to(first)
-    sigma = math.sqrt(max(P[0, 0], P[1, 1]))
-    assert 40.0 < sigma < 400.0  # a coast of 10 s: well beyond the UAV's neighbourhood
-
-    def taken(cap: float) -> bool:
-        prof = dataclasses.replace(base, score=dataclasses.replace(base.score, lost_sigma_m=cap))
-        steps = run_tracker(Tracker(prof, site), items)
-        return any(s.updated and s.track_id == BIRD_ID for s in steps)
-
-    assert taken(1.01 * sigma) and not taken(0.99 * sigma)
+@pytest.mark.parametrize(
+    "r", [(400.0, 0.0, 0.0, 900.0, 0.0, 100.0), (900.0, 0.0, 400.0)], ids=["3d", "2d"]
+)
+def test_agreement_is_informative_up_to_the_reports_own_horizontal_variance(
+    r: tuple[float, ...],
+) -> None:
+    """A report's agreement with the track counts while the track's largest horizontal
+    variance is at most the report's (here 900 m^2: its north variance in 3D, its east one
+    in 2D; the vertical one does not enter)."""
+    assert follow.informative(900.0, r) and follow.informative(0.0, r)
+    assert not follow.informative(900.01, r)
 
 
 def test_an_object_out_of_reach_of_a_coasting_track_is_not_followed(site: Site) -> None:

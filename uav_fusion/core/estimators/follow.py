@@ -22,7 +22,12 @@ score):
   reports) and outscored the followed object by ``challenge_margin``, the radar's track has
   most likely left the UAV: the track is dropped (``reinit_challenged``) and started again
   from the frame's reports. The two are compared without their agreement with the fused
-  track, which the followed object has because the track follows it;
+  track, which the followed object has because the track follows it. Each report records
+  in its object whether it agrees with the track (:meth:`ObjectTable.mark_fused
+  <uav_fusion.core.estimators.objects.ObjectTable.mark_fused>`) only while the track knows
+  the UAV's horizontal position at least as well as the report does (:func:`informative`):
+  after a long coast the gate spans far more than the UAV's neighbourhood, and any report
+  inside it would count as agreement;
 - no confirmed track: the object with the highest score reaching ``init_min`` with at least
   ``init_min_reports`` reports starts a confirmed track from its own filter's state; a
   tentative RF track is confirmed by a strong report inside its gate or superseded by one.
@@ -53,6 +58,14 @@ if TYPE_CHECKING:
 Scored = tuple[int, RadarTrack, RadarObject, float, tuple[float, ...], PackedR, float, bool]
 # a frame's candidate before scoring: (index in the frame, report, its object, its score)
 Candidate = tuple[int, RadarTrack, RadarObject, float]
+
+
+def informative(track_var_m2: float, r: PackedR) -> bool:
+    """Whether a report's agreement with the track says anything: the track's largest
+    horizontal variance (east or north) is at most the report's own (its R, 3D packed or,
+    beyond the 3D gate, 2D packed)."""
+    r_var = max(r[0], r[3] if len(r) == 6 else r[2])
+    return track_var_m2 <= r_var
 
 
 class RadarFollower:
@@ -105,13 +118,10 @@ class RadarFollower:
             # the CV filter's kernel directly (what CvFilter.nis calls for a 3D z)
             nis3 = f.kf.nis3 if isinstance(f, CvFilter) else None
             mark = tr.objects.mark_fused if tr.confirmed else None
-            cap = cfg.lost_sigma_m
-            if mark is not None and cap > 0:
+            p_var = 0.0
+            if mark is not None:
                 p = f.mean()[1]
-                if (p[0] if p[0] > p[6] else p[6]) > cap * cap:
-                    # a long coast: the gate spans far more than the UAV's neighbourhood, so
-                    # an object inside it agrees with nothing in particular (not recorded)
-                    mark = None
+                p_var = p[0] if p[0] > p[6] else p[6]
             fused_nis = cfg.fused_nis
             reach = cfg.reach_margin_m
             g2 = tr._g2
@@ -136,7 +146,7 @@ class RadarFollower:
                         # a ground object no second source confirms (gates.py)
                         inside = False
                         refused[i] = "ground"
-                if mark is not None:
+                if mark is not None and informative(p_var, r):
                     mark(obj, nis <= fused_nis, t)
                 scored.append((i, trk, obj, s, z, r, nis, inside))
             if not tr.confirmed:

@@ -47,10 +47,10 @@ constant ``tau_s``: the time its history needs to say what the object is.
 * agreement with the fused track: moving average (time constant ``fused_tau_s``) of "this
   object's report had an NIS of at most ``fused_nis`` against the UAV track" (closer than
   the gate: the gate is wide when the track's R allows for correlated errors), times
-  ``fused_weight``; nothing is recorded
-  while the track's horizontal position standard deviation exceeds ``lost_sigma_m`` (0: no
-  limit; after a long coast the gate spans far more than the UAV's neighbourhood, and a
-  first report inside it would count as full agreement: ``Tracker``);
+  ``fused_weight``; the single-UAV tracker records nothing while the track knows the UAV's
+  horizontal position less well than the report does (after a long coast the gate spans far
+  more than the UAV's neighbourhood, and a first report inside it would count as full
+  agreement: :func:`~uav_fusion.core.estimators.follow.informative`);
 * age: ``age_weight * min(1, age / tau_s)`` (a track that persists is more likely real; the
   term is full once the object's history has settled).
 

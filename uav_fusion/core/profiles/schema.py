@@ -280,9 +280,6 @@ _ASSOCIATION = (
            bounds=">= 0"),
         _s("nis", "fused_nis", NUMBER, DESIGN, "a report agrees at an NIS of at most this",
            bounds=">= 0"),
-        _s("lost_sigma_m", "lost_sigma_m", NUMBER, FITTED, "single-UAV tracker: no agreement "
-           "is recorded while the track's horizontal sigma exceeds this (0: off)", unit="m",
-           bounds=">= 0", fit=TUNED),
     ),
     *_group("association.age", TRACKER,
         _s("weight", "age_weight", NUMBER, DESIGN, "weight of the age term, full from an age of "
@@ -433,6 +430,8 @@ RETIRED: dict[str, str] = {
     "update interval (1.3 s, its datasheet)",
     "association.thresholds.init_min_reports": "an object needs track.confirm_m reports to "
     "start a track",
+    "association.fused.lost_sigma_m": "the single-UAV tracker records no agreement while the "
+    "track knows the UAV's horizontal position less well than the report does (its R)",
 }
 
 

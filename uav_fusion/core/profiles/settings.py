@@ -57,7 +57,6 @@ class ScoreConfig:
     fused_weight: float = 1.5
     fused_tau_s: float = 10.0
     fused_nis: float = 3.0
-    lost_sigma_m: float = 0.0  # 0: agreement counts however uncertain the track is
     reach_margin_m: float = 0.0  # single-UAV tracker: 0: no reach gate (Tracker._reachable)
     age_weight: float = 0.5
     object_q: float = 5.0
