@@ -56,7 +56,9 @@ def _is_file(p: Path) -> bool:
         return False
 
 
-def _unknown(path: str, where: str) -> ConfigError:
+def unknown_key(path: str, where: str) -> ConfigError:
+    """The error for a key path the schema does not have (in ``where``): what to do when it
+    has been retired, else where a key of that name belongs, else the section's keys."""
     if path == "association.mode":
         return ConfigError(
             f"{where}: association.mode is no longer a key: the estimator is chosen by the "
@@ -85,8 +87,8 @@ def check_layout(doc: dict[Any, Any], where: str, section: str = "") -> None:
             if isinstance(v, dict):  # a section that has left the schema: name its key
                 for sub in v:
                     if f"{path}.{sub}" in RETIRED:
-                        raise _unknown(f"{path}.{sub}", where)
-            raise _unknown(path, where)
+                        raise unknown_key(f"{path}.{sub}", where)
+            raise unknown_key(path, where)
         if v is None:
             continue
         if not isinstance(v, dict):

@@ -32,8 +32,8 @@ from uav_fusion.core.profiles.checks import (
     convert,
     validate_transition,
 )
-from uav_fusion.core.profiles.inherit import profile_path, resolve
-from uav_fusion.core.profiles.schema import BY_PATH, KEYS, RETIRED, find
+from uav_fusion.core.profiles.inherit import profile_path, resolve, unknown_key
+from uav_fusion.core.profiles.schema import BY_PATH, KEYS, find
 from uav_fusion.core.profiles.settings import MultiSettings, ScoreConfig
 from uav_fusion.core.records import RADAR, RF
 from uav_fusion.core.yamlio import read_yaml_file
@@ -147,10 +147,7 @@ class Profile:
         for path, value in values.items():
             key = find(path)
             if key is None or not key.attr:
-                where = self.source or self.name
-                if path in RETIRED:
-                    raise ConfigError(f"{where}: '{path}' is no longer a key: {RETIRED[path]}")
-                raise ConfigError(f"{where}: unknown key '{path}'")
+                raise unknown_key(path, str(self.source or self.name))
             owner, _, name = key.attr.rpartition(".")
             (parts[owner] if owner else changes)[name] = value
         for owner, vals in parts.items():
